@@ -1,0 +1,16 @@
+"""pilco: Probabilistic Inference for Learning COntrol on GPflow.
+
+Sub-modules:
+
+- :mod:`pilco.models`: ``MGPR``, ``SMGPR`` (GP dynamics with moment matching) and ``PILCO``.
+- :mod:`pilco.controllers`: squashing functions and linear / RBF policies.
+- :mod:`pilco.rewards`: saturating (exponential), linear, combined and cart-pole rewards.
+- :mod:`pilco.angles`: sin/cos augmentation of angle dimensions under a Gaussian.
+- :mod:`pilco.envs`: gymnasium environments of the paper (cart-pole, Fetch joint reacher).
+- :mod:`pilco.deploy`: NumPy-only policy evaluation for robots (no TensorFlow import).
+"""
+import logging
+
+__version__ = "0.1.0"
+
+logging.getLogger(__name__).addHandler(logging.NullHandler())

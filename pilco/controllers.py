@@ -1,0 +1,222 @@
+"""Policies and the squashing functions that bound their actions.
+
+A controller maps a Gaussian state ``N(m, s)`` to the Gaussian moments of its action:
+``compute_action(m, s) -> (M [1, U], S [U, U], V [D, U])`` with
+``V = inv(s) Cov[x, u]``. Actions are bounded by a squashing function applied to the
+unsquashed action's moments:
+
+- :func:`squash_sin`: ``u = e * sin(v)``;
+- :func:`squash_sat`: ``u = e * (9 sin v + sin 3v) / 8``, a flatter saturation.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Callable, Optional
+
+import gpflow
+import numpy as np
+import tensorflow as tf
+from gpflow import Parameter
+from gpflow.config import default_float
+from gpflow.utilities import positive
+
+from . import moments
+from .validation import check_gaussian, check_positive_int, check_max_action, as_2d_float
+
+__all__ = ["squash_sin", "squash_sat", "LinearController", "RbfController"]
+
+logger = logging.getLogger(__name__)
+
+
+def _sin_moments(m, s, e):
+    """Moments of ``e * sin(x)`` elementwise for x ~ N(m, s).
+
+    Shapes: m [1, I], s [I, I], e [I] -> M [1, I], S [I, I], C [I, I].
+    """
+    mi = m[0]
+    vii = tf.linalg.diag_part(s)
+    damp = e * tf.exp(-0.5 * vii)
+    M = damp * tf.sin(mi)
+    lq = -0.5 * (vii[:, None] + vii[None, :])
+    q = tf.exp(lq)
+    S = (tf.exp(lq + s) - q) * tf.cos(mi[:, None] - mi[None, :]) - (tf.exp(lq - s) - q) * tf.cos(
+        mi[:, None] + mi[None, :]
+    )
+    S = 0.5 * e[:, None] * e[None, :] * S
+    C = tf.linalg.diag(damp * tf.cos(mi))
+    return M[None, :], S, C
+
+
+def _max_action_vector(max_action, size: int, dtype) -> tf.Tensor:
+    e = tf.reshape(tf.cast(tf.convert_to_tensor(max_action), dtype), [-1])
+    return tf.broadcast_to(e, [size])
+
+
+def squash_sin(m, s, max_action=None):
+    """Sine squashing ``max_action * sin(v)`` of a Gaussian action v ~ N(m, s).
+
+    Shapes: m [1, U], s [U, U], max_action scalar or [U] (default 1)
+    -> M [1, U], S [U, U], C [U, U] with ``C = inv(s) Cov[v, u]`` (diagonal).
+    """
+    m = tf.convert_to_tensor(m, dtype=default_float())
+    s = tf.convert_to_tensor(s, dtype=default_float())
+    U = m.shape[-1]
+    e = _max_action_vector(1.0 if max_action is None else max_action, U, m.dtype)
+    return _sin_moments(m, s, e)
+
+
+def squash_sat(m, s, max_action=None):
+    """Saturating squashing ``max_action * (9 sin v + sin 3v) / 8`` of v ~ N(m, s).
+
+    Its first derivative vanishes at the bounds, so it saturates more gently than
+    :func:`squash_sin`. Shapes as :func:`squash_sin`.
+    """
+    m = tf.convert_to_tensor(m, dtype=default_float())
+    s = tf.convert_to_tensor(s, dtype=default_float())
+    U = m.shape[-1]
+    e = _max_action_vector(1.0 if max_action is None else max_action, U, m.dtype)
+    # moments of [sin v, sin 3v] from the augmented Gaussian [v, 3v]
+    ma = tf.concat([m, 3.0 * m], axis=1)
+    sa = tf.concat([tf.concat([s, 3.0 * s], 1), tf.concat([3.0 * s, 9.0 * s], 1)], 0)
+    M2, S2, C2 = _sin_moments(ma, sa, tf.concat([9.0 * e / 8.0, e / 8.0], 0))
+    M = M2[:, :U] + M2[:, U:]
+    S = S2[:U, :U] + S2[:U, U:] + S2[U:, :U] + S2[U:, U:]
+    S = 0.5 * (S + tf.transpose(S))
+    C = C2[:U, :U] + 3.0 * C2[U:, U:]
+    return M, S, C
+
+
+class LinearController(gpflow.base.Module):
+    """Affine policy ``u = squash(x W^T + b)``.
+
+    Parameters: ``W`` [U, D], ``b`` [1, U] (trainable).
+    """
+
+    def __init__(self, state_dim: int, control_dim: int, max_action=1.0, squash=squash_sin,
+                 seed: Optional[int] = None):
+        super().__init__()
+        self.state_dim = check_positive_int(state_dim, "state_dim")
+        self.control_dim = check_positive_int(control_dim, "control_dim")
+        self.max_action = check_max_action(max_action, self.control_dim)
+        self.squash = squash
+        rng = np.random.default_rng(seed)
+        self.W = Parameter(rng.uniform(-0.1, 0.1, (self.control_dim, self.state_dim)))
+        self.b = Parameter(np.zeros((1, self.control_dim)))
+
+    def compute_action(self, m, s, squash: bool = True):
+        """Action moments. Shapes: m [1, D], s [D, D] -> M [1, U], S [U, U], V [D, U]."""
+        m, s = check_gaussian(m, s, self.state_dim, "state")
+        return self._action(m, s, squash)
+
+    def _action(self, m, s, squash=True):
+        W = tf.convert_to_tensor(self.W)
+        M = tf.matmul(m, W, transpose_b=True) + self.b
+        S = tf.matmul(W, tf.matmul(s, W, transpose_b=True))
+        V = tf.transpose(W)
+        if squash and self.squash is not None:
+            M, S, C = self.squash(M, S, self.max_action)
+            V = tf.matmul(V, C)
+        return M, S, V
+
+    def randomize(self, scale: float = 0.1, seed: Optional[int] = None):
+        """Draw fresh parameters: W, b ~ N(0, scale^2)."""
+        rng = np.random.default_rng(seed)
+        self.W.assign(scale * rng.standard_normal(self.W.shape))
+        self.b.assign(scale * rng.standard_normal(self.b.shape))
+
+
+class _PolicyOutput(gpflow.base.Module):
+    """One output of the RBF policy, shaped like a GPR: ``.kernel`` and ``.likelihood``."""
+
+    def __init__(self, state_dim: int):
+        super().__init__()
+        self.kernel = gpflow.kernels.SquaredExponential(lengthscales=np.ones(state_dim))
+        self.kernel.variance.assign(1.0)
+        gpflow.set_trainable(self.kernel.variance, False)
+        self.likelihood = gpflow.likelihoods.Gaussian(variance=1e-4)
+        gpflow.set_trainable(self.likelihood.variance, False)
+
+
+class RbfController(gpflow.base.Module):
+    """Radial-basis-function policy, built as a deterministic GP (PILCO's ``congp``).
+
+    Each action dimension is the posterior mean of a GP with a squared-exponential
+    kernel whose "training inputs" are the basis-function centers [n, D] and whose
+    "targets" [n, U] set the weights. The signal variance (1) and noise variance
+    (1e-4) are fixed; centers, targets and lengthscales are trainable. Under a
+    Gaussian state the policy's moments carry no model uncertainty.
+
+    ``models[i]`` exposes ``.kernel.lengthscales``, ``.kernel.variance`` and
+    ``.likelihood.variance`` of output i, like :class:`pilco.models.MGPR`.
+    """
+
+    def __init__(self, state_dim: int, control_dim: int, num_basis_functions: int,
+                 max_action=1.0, squash: Optional[Callable] = squash_sin,
+                 seed: Optional[int] = None):
+        super().__init__()
+        self.state_dim = check_positive_int(state_dim, "state_dim")
+        self.control_dim = check_positive_int(control_dim, "control_dim")
+        self.num_basis_functions = check_positive_int(num_basis_functions, "num_basis_functions")
+        self.max_action = check_max_action(max_action, self.control_dim)
+        self.squash = squash
+        rng = np.random.default_rng(seed)
+        self.centers = Parameter(rng.standard_normal((self.num_basis_functions, self.state_dim)))
+        self.targets = Parameter(
+            0.1 * rng.standard_normal((self.num_basis_functions, self.control_dim))
+        )
+        self.models = [_PolicyOutput(self.state_dim) for _ in range(self.control_dim)]
+
+    def set_data(self, data):
+        """Set centers [n, D] and targets [n, U] (``n`` must stay the same)."""
+        X, Y = data
+        X = as_2d_float(X, "centers")
+        Y = as_2d_float(Y, "targets")
+        if X.shape != (self.num_basis_functions, self.state_dim):
+            raise ValueError(
+                f"centers must have shape ({self.num_basis_functions}, {self.state_dim}), "
+                f"got {X.shape}"
+            )
+        if Y.shape != (self.num_basis_functions, self.control_dim):
+            raise ValueError(
+                f"targets must have shape ({self.num_basis_functions}, {self.control_dim}), "
+                f"got {Y.shape}"
+            )
+        self.centers.assign(X)
+        self.targets.assign(Y)
+
+    def hyperparameters(self):
+        """Stacked hyperparameters: lengthscales [U, D], variance [U], noise [U]."""
+        ell = tf.stack([tf.convert_to_tensor(g.kernel.lengthscales) for g in self.models])
+        sf2 = tf.stack([tf.convert_to_tensor(g.kernel.variance) for g in self.models])
+        sn2 = tf.stack([tf.convert_to_tensor(g.likelihood.variance) for g in self.models])
+        return ell, sf2, sn2
+
+    def factorize(self) -> moments.Factorization:
+        """Deterministic-GP pieces (beta, no K^-1) for the current parameters."""
+        ell, sf2, sn2 = self.hyperparameters()
+        return moments.factorize(
+            tf.convert_to_tensor(self.centers), tf.convert_to_tensor(self.targets),
+            ell, sf2, sn2, with_inverse=False,
+        )
+
+    def compute_action(self, m, s, squash: bool = True):
+        """Action moments. Shapes: m [1, D], s [D, D] -> M [1, U], S [U, U], V [D, U]."""
+        m, s = check_gaussian(m, s, self.state_dim, "state")
+        return self._action(m, s, squash)
+
+    def _action(self, m, s, squash=True, fact: Optional[moments.Factorization] = None):
+        if fact is None:
+            fact = self.factorize()
+        M, S, V = moments.moment_match(m, s, fact)
+        if squash and self.squash is not None:
+            M, S, C = self.squash(M, S, self.max_action)
+            V = tf.matmul(V, C)
+        return M, S, V
+
+    def randomize(self, scale: float = 1.0, seed: Optional[int] = None):
+        """Draw fresh centers ~ N(0, scale^2), targets ~ N(0, 0.1^2), lengthscales ~ 1."""
+        rng = np.random.default_rng(seed)
+        self.centers.assign(scale * rng.standard_normal(self.centers.shape))
+        self.targets.assign(0.1 * rng.standard_normal(self.targets.shape))
+        for g in self.models:
+            g.kernel.lengthscales.assign(1.0 + 0.1 * rng.standard_normal(self.state_dim))

@@ -1,0 +1,216 @@
+"""Multi-output GP regression with moment matching at uncertain inputs.
+
+:class:`MGPR` holds one ``gpflow.models.GPR`` per output dimension (independent GPs with
+ARD squared-exponential kernels sharing the training inputs) and predicts the Gaussian
+moments of all outputs at a Gaussian input exactly (Deisenroth's moment matching).
+
+Hyperparameter safety (documented defaults):
+
+- the likelihood (noise) variance has a hard lower bound ``noise_floor`` (default 1e-6,
+  relative to a unit-variance target), so it cannot collapse to 0 and make the kernel
+  matrix singular;
+- hyperparameters start from the data: lengthscales at the inputs' standard deviations,
+  signal variance at the targets' variance, noise variance at 1% of it;
+- a Cholesky failure during training is caught: the best values seen so far are
+  restored, the noise is raised, and a warning is logged.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Dict, List, Optional
+
+import gpflow
+import numpy as np
+import tensorflow as tf
+from gpflow.config import default_float
+from gpflow.utilities import multiple_assign, read_values
+
+from .. import moments
+from ..validation import check_data, check_gaussian
+
+__all__ = ["MGPR"]
+
+logger = logging.getLogger(__name__)
+
+
+class MGPR(gpflow.base.Module):
+    """E independent GPs on shared inputs: ``X [N, D] -> Y [N, E]``.
+
+    ``models[i]`` is the ``gpflow.models.GPR`` of output i; assign hyperparameters on
+    ``models[i].kernel.lengthscales``, ``.kernel.variance`` and ``.likelihood.variance``.
+    The data live in ``tf.Variable``s, so :meth:`set_data` never invalidates compiled code.
+    """
+
+    def __init__(self, data, noise_floor: float = 1e-6, name: Optional[str] = None):
+        super().__init__(name=name)
+        X, Y = check_data(data, "data")
+        if not noise_floor > 0:
+            raise ValueError(f"noise_floor must be positive, got {noise_floor}")
+        self.noise_floor = float(noise_floor)
+        self.num_outputs = Y.shape[1]
+        self.num_dims = X.shape[1]
+        self._X = tf.Variable(X, shape=[None, self.num_dims], trainable=False, name="X")
+        self._Y = [
+            tf.Variable(Y[:, i : i + 1], shape=[None, 1], trainable=False, name=f"Y{i}")
+            for i in range(self.num_outputs)
+        ]
+        self.models: List[gpflow.models.GPModel] = self._build_models(X, Y)
+        self.initialize_hyperparameters()
+
+    # -- construction -------------------------------------------------------------------
+    def _new_kernel(self):
+        return gpflow.kernels.SquaredExponential(lengthscales=np.ones(self.num_dims))
+
+    def _new_likelihood(self):
+        return gpflow.likelihoods.Gaussian(variance=0.01, variance_lower_bound=self.noise_floor)
+
+    def _build_models(self, X, Y):
+        return [
+            gpflow.models.GPR(
+                (self._X, self._Y[i]), kernel=self._new_kernel(), likelihood=self._new_likelihood()
+            )
+            for i in range(self.num_outputs)
+        ]
+
+    def initialize_hyperparameters(self, rng: Optional[np.random.Generator] = None,
+                                   spread: float = 0.0):
+        """Data-driven starting values, optionally perturbed log-normally by ``spread``."""
+        X = self._X.numpy()
+        rng = rng or np.random.default_rng()
+        ell0 = np.maximum(np.std(X, axis=0), 1e-3) if len(X) > 1 else np.ones(self.num_dims)
+        for i, model in enumerate(self.models):
+            y = self._Y[i].numpy()
+            var = float(np.var(y)) if len(y) > 1 else 1.0
+            var = max(var, 1e-6)
+            jitter = lambda size: np.exp(spread * rng.standard_normal(size))  # noqa: E731
+            model.kernel.lengthscales.assign(ell0 * jitter(self.num_dims))
+            model.kernel.variance.assign(var * jitter(1)[0])
+            model.likelihood.variance.assign(max(0.01 * var * jitter(1)[0], 2 * self.noise_floor))
+
+    # -- data -----------------------------------------------------------------------------
+    @property
+    def X(self) -> tf.Tensor:
+        """Training inputs [N, D]."""
+        return tf.convert_to_tensor(self._X)
+
+    @property
+    def Y(self) -> tf.Tensor:
+        """Training targets [N, E]."""
+        return tf.concat([tf.convert_to_tensor(y) for y in self._Y], axis=1)
+
+    @property
+    def data(self):
+        return self.X, self.Y
+
+    def set_data(self, data):
+        """Replace the training data; shapes ``X [N, D]``, ``Y [N, E]`` (N may change)."""
+        X, Y = check_data(data, "data", x_dim=self.num_dims, y_dim=self.num_outputs)
+        self._X.assign(X)
+        for i, y in enumerate(self._Y):
+            y.assign(Y[:, i : i + 1])
+
+    # -- hyperparameters ------------------------------------------------------------------
+    def hyperparameters(self):
+        """Stacked hyperparameters: lengthscales [E, D], signal variance [E], noise [E]."""
+        ell = tf.stack([tf.convert_to_tensor(m.kernel.lengthscales) for m in self.models])
+        sf2 = tf.stack([tf.convert_to_tensor(m.kernel.variance) for m in self.models])
+        sn2 = tf.stack([tf.convert_to_tensor(m.likelihood.variance) for m in self.models])
+        return ell, sf2, sn2
+
+    @property
+    def noise_variance(self) -> tf.Tensor:
+        """Likelihood variances [E]."""
+        return self.hyperparameters()[2]
+
+    def factorize(self) -> moments.Factorization:
+        """Input-independent prediction pieces (beta, K^-1) for the current hyperparameters."""
+        ell, sf2, sn2 = self.hyperparameters()
+        return moments.factorize(self.X, self.Y, ell, sf2, sn2)
+
+    # -- prediction -----------------------------------------------------------------------
+    def predict_on_noisy_inputs(self, m, s):
+        """Moments of f(x) at x ~ N(m, s), exactly.
+
+        Shapes: m [1, D], s [D, D] -> M [1, E], S [E, E], V [D, E] with
+        ``V = inv(s) Cov[x, f(x)]``. ``S`` is the latent covariance (no observation noise).
+        """
+        m, s = check_gaussian(m, s, self.num_dims, "input")
+        return moments.moment_match(m, s, self.factorize())
+
+    def predict_f(self, Xnew):
+        """Latent mean and variance at deterministic inputs: [N*, D] -> ([N*, E], [N*, E])."""
+        means, vars_ = zip(*(m.predict_f(Xnew) for m in self.models))
+        return tf.concat(means, axis=1), tf.concat(vars_, axis=1)
+
+    # -- training -------------------------------------------------------------------------
+    def _model_losses(self) -> np.ndarray:
+        return np.array([float(m.training_loss().numpy()) for m in self.models])
+
+    def _training_loss(self):
+        return tf.add_n([m.training_loss() for m in self.models])
+
+    def log_marginal_likelihood(self) -> np.ndarray:
+        """Log evidence of each output's GP, [E] (priors excluded)."""
+        return np.array([float(m.log_marginal_likelihood().numpy()) for m in self.models])
+
+    def optimize(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None):
+        """Maximise the evidence of every output's GP with L-BFGS-B (gpflow Scipy).
+
+        The first run starts from the current hyperparameters; each further restart starts
+        from data-driven values perturbed at random. The outputs are independent, so the
+        best values of each output across runs are kept (copies of the values, not
+        references to the live variables). Returns the final per-output losses [E].
+        """
+        if restarts < 1:
+            raise ValueError(f"restarts must be at least 1, got {restarts}")
+        rng = np.random.default_rng(seed)
+        opt = gpflow.optimizers.Scipy()
+        groups = self._selection_groups()
+        best_losses = [np.inf] * len(groups)
+        best_values: List[Optional[Dict[str, np.ndarray]]] = [None] * len(groups)
+
+        def record():
+            try:
+                losses = self._model_losses()
+            except tf.errors.InvalidArgumentError:
+                return
+            for g, (module, idx) in enumerate(groups):
+                loss = float(np.sum(losses[idx]))
+                if np.isfinite(loss) and loss < best_losses[g]:
+                    best_losses[g] = loss
+                    best_values[g] = {k: np.array(v, copy=True)
+                                      for k, v in read_values(module).items()}
+
+        record()  # never end worse than where we started
+        for r in range(restarts):
+            if r > 0:
+                self.initialize_hyperparameters(rng, spread=0.5)
+            try:
+                opt.minimize(self._training_loss, self.trainable_variables,
+                             options=dict(maxiter=maxiter), method="L-BFGS-B")
+            except (tf.errors.InvalidArgumentError, ValueError) as err:
+                logger.warning(
+                    "GP training run %d failed (%s); keeping the best hyperparameters so far "
+                    "and raising the noise variance", r, str(err).splitlines()[0][:120],
+                )
+                self._restore(groups, best_values)
+                for model in self.models:
+                    v = float(model.likelihood.variance.numpy())
+                    model.likelihood.variance.assign(max(10 * v, 100 * self.noise_floor))
+            record()
+        self._restore(groups, best_values)
+        logger.info("GP training done: losses %s", np.round(best_losses, 3))
+        return self._model_losses()
+
+    def _selection_groups(self):
+        """Modules whose values are kept together across restarts, with their outputs.
+
+        Independent outputs are selected one by one (the best run of each output).
+        """
+        return [(model, [i]) for i, model in enumerate(self.models)]
+
+    @staticmethod
+    def _restore(groups, values):
+        for (module, _), vals in zip(groups, values):
+            if vals is not None:
+                multiple_assign(module, vals)

@@ -1,0 +1,171 @@
+"""Rewards whose expectation and variance under a Gaussian state are exact.
+
+Every reward has ``compute_reward(m [1, D], s [D, D]) -> (mean [1, 1], variance [1, 1])``.
+PILCO maximises the sum of expected rewards over the horizon. A saturating
+("exponential") reward ``exp(-(x - t)^T W (x - t) / 2)`` is PILCO's cost ``1 - reward``.
+"""
+from __future__ import annotations
+
+from typing import Optional, Sequence
+
+import gpflow
+import numpy as np
+import tensorflow as tf
+from gpflow.config import default_float
+
+from .angles import trig_moments
+from .validation import check_gaussian, check_positive_int, _to_numpy, _check_finite
+
+__all__ = ["ExponentialReward", "LinearReward", "CombinedRewards", "CartPoleReward"]
+
+
+def _exp_reward_moments(m, s, W, t):
+    """Mean and variance of ``exp(-(x - t)^T W (x - t) / 2)`` for x ~ N(m, s).
+
+    Shapes: m [1, D], s [D, D], W [D, D], t [1, D] -> mean [1, 1], variance [1, 1].
+    """
+    D = tf.shape(s)[0]
+    eye = tf.eye(D, dtype=s.dtype)
+    d = m - t
+    SW = tf.matmul(s, W)
+    # W (I + s W)^-1, written through a solve with the transposed system
+    iSpW = tf.transpose(tf.linalg.solve(tf.transpose(eye + SW), W))
+    mean = tf.exp(-0.5 * tf.matmul(tf.matmul(d, iSpW), d, transpose_b=True)) * tf.exp(
+        -0.5 * tf.linalg.slogdet(eye + SW)[1]
+    )
+    i2SpW = tf.transpose(tf.linalg.solve(tf.transpose(eye + 2.0 * SW), W))
+    r2 = tf.exp(-tf.matmul(tf.matmul(d, i2SpW), d, transpose_b=True)) * tf.exp(
+        -0.5 * tf.linalg.slogdet(eye + 2.0 * SW)[1]
+    )
+    return mean, r2 - mean * mean
+
+
+class _Reward(gpflow.base.Module):
+    state_dim: int
+
+    def compute_reward(self, m, s):
+        """Expected reward and its variance. Shapes: m [1, D], s [D, D] -> [1, 1], [1, 1]."""
+        m, s = check_gaussian(m, s, self.state_dim, "state")
+        return self._reward(m, s)
+
+    def _reward(self, m, s):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+def _matrix(value, shape, name):
+    arr = _to_numpy(value, name)
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    _check_finite(arr, name)
+    return arr
+
+
+class ExponentialReward(_Reward):
+    """Saturating reward ``exp(-(x - t)^T W (x - t) / 2)`` in [0, 1].
+
+    ``W`` [D, D] symmetric positive semi-definite (default identity), target ``t`` [1, D]
+    (default zeros). Both are non-trainable parameters that can be reassigned.
+    """
+
+    def __init__(self, state_dim: int, W=None, t=None):
+        super().__init__()
+        self.state_dim = D = check_positive_int(state_dim, "state_dim")
+        W = np.eye(D) if W is None else _matrix(W, (D, D), "W")
+        if not np.allclose(W, W.T):
+            raise ValueError("W must be symmetric")
+        if np.min(np.linalg.eigvalsh(W)) < -1e-10 * max(1.0, np.abs(W).max()):
+            raise ValueError("W must be positive semi-definite")
+        t = np.zeros((1, D)) if t is None else _to_numpy(t, "t").reshape(1, -1)
+        if t.shape != (1, D):
+            raise ValueError(f"t (the target) must have {D} entries, got {t.shape[1]}")
+        _check_finite(t, "t")
+        self.W = gpflow.Parameter(W, trainable=False)
+        self.t = gpflow.Parameter(t, trainable=False)
+
+    def _reward(self, m, s):
+        return _exp_reward_moments(m, s, tf.convert_to_tensor(self.W), tf.convert_to_tensor(self.t))
+
+
+class LinearReward(_Reward):
+    """Linear reward ``x^T W`` with ``W`` [D, 1]; variance ``W^T s W``."""
+
+    def __init__(self, state_dim: int, W):
+        super().__init__()
+        self.state_dim = D = check_positive_int(state_dim, "state_dim")
+        W = _to_numpy(W, "W").reshape(-1, 1)
+        if W.shape != (D, 1):
+            raise ValueError(f"W must have {D} entries, got {W.shape[0]}")
+        _check_finite(W, "W")
+        self.W = gpflow.Parameter(W, trainable=False)
+
+    def _reward(self, m, s):
+        W = tf.convert_to_tensor(self.W)
+        return tf.matmul(m, W), tf.matmul(tf.transpose(W), tf.matmul(s, W))
+
+
+class CombinedRewards(_Reward):
+    """Weighted sum ``sum_i c_i r_i(x)`` of rewards.
+
+    The variance is ``sum_i c_i^2 Var[r_i]``: the covariance between the rewards is
+    neglected (exact when at most one term is random).
+    """
+
+    def __init__(self, state_dim: int, rewards: Sequence[_Reward], coefs=None):
+        super().__init__()
+        self.state_dim = check_positive_int(state_dim, "state_dim")
+        if len(rewards) == 0:
+            raise ValueError("rewards must not be empty")
+        for r in rewards:
+            if getattr(r, "state_dim", None) != self.state_dim:
+                raise ValueError(
+                    f"every reward must have state_dim {self.state_dim}, got "
+                    f"{getattr(r, 'state_dim', None)} for {type(r).__name__}"
+                )
+        self.base_rewards = list(rewards)
+        coefs = np.ones(len(rewards)) if coefs is None else _to_numpy(coefs, "coefs").reshape(-1)
+        if coefs.size != len(rewards):
+            raise ValueError(f"coefs must have {len(rewards)} entries, got {coefs.size}")
+        self.coefs = gpflow.Parameter(coefs, trainable=False)
+
+    def _reward(self, m, s):
+        mean = 0.0
+        var = 0.0
+        c = tf.convert_to_tensor(self.coefs)
+        for i, r in enumerate(self.base_rewards):
+            mi, vi = r._reward(m, s)
+            mean += c[i] * mi
+            var += c[i] ** 2 * vi
+        return mean, var
+
+
+class CartPoleReward(_Reward):
+    """Saturating reward on the cart-pole's pendulum tip (the MATLAB release's ``loss_cp``).
+
+    State ``[x, x_dot, theta_dot, theta]`` with θ = 0 hanging down. The tip of a pendulum
+    of length ``l`` on a cart at x is at ``(x + l sin θ, -l cos θ)``; the reward is
+    ``exp(-d^2 / (2 width^2))`` with d the tip's distance to the upright target
+    ``(0, l)``, evaluated exactly by augmenting the state with (sin θ, cos θ).
+    """
+
+    def __init__(self, pendulum_length: float = 0.5, width: float = 0.25):
+        super().__init__()
+        self.state_dim = 4
+        for name, v in (("pendulum_length", pendulum_length), ("width", width)):
+            if not np.isfinite(v) or v <= 0:
+                raise ValueError(f"{name} must be positive and finite, got {v}")
+        self.pendulum_length = float(pendulum_length)
+        self.width = float(width)
+        l = self.pendulum_length
+        Q = np.zeros((6, 6))
+        Q[np.ix_([0, 4], [0, 4])] = np.outer([1.0, l], [1.0, l])  # (x + l sin θ)^2
+        Q[5, 5] = l ** 2  # l^2 (cos θ + 1)^2
+        self._W = tf.constant(Q / self.width ** 2, dtype=default_float())
+        self._t = tf.constant([[0.0, 0.0, 0.0, np.pi, np.sin(np.pi), np.cos(np.pi)]],
+                              dtype=default_float())
+
+    def _reward(self, m, s):
+        Mt, St, Ct = trig_moments(m, s, [3])
+        cross = tf.matmul(s, Ct)
+        M6 = tf.concat([m, Mt], axis=1)
+        S6 = tf.concat([tf.concat([s, cross], 1), tf.concat([tf.transpose(cross), St], 1)], 0)
+        return _exp_reward_moments(M6, S6, self._W, self._t)

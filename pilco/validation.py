@@ -1,0 +1,141 @@
+"""Checks at the public API boundary: bad input is reported before TensorFlow sees it.
+
+Every check raises :class:`ValueError` (wrong values or shapes) or :class:`TypeError`
+(wrong kinds of object) whose message names the argument and the problem.
+"""
+from __future__ import annotations
+
+import numbers
+from typing import Optional, Tuple
+
+import numpy as np
+import tensorflow as tf
+from gpflow.config import default_float
+
+__all__ = [
+    "as_2d_float",
+    "check_data",
+    "check_gaussian",
+    "check_covariance",
+    "check_positive_int",
+    "check_max_action",
+]
+
+
+def _to_numpy(x, name: str) -> np.ndarray:
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
+    if tf.is_tensor(x) or isinstance(x, tf.Variable):
+        x = x.numpy() if hasattr(x, "numpy") else tf.convert_to_tensor(x).numpy()
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be an array of numbers: {err}") from None
+    return arr
+
+
+def _check_finite(arr: np.ndarray, name: str) -> None:
+    if not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))
+        kind = "NaN" if np.any(np.isnan(arr)) else "inf"
+        raise ValueError(
+            f"{name} contains {kind} values ({len(bad)} entries, first at index "
+            f"{tuple(int(i) for i in bad[0])})"
+        )
+
+
+def as_2d_float(x, name: str, allow_empty: bool = False) -> np.ndarray:
+    """A finite float64 array of rank 2, or a clear error. Shape: [N, K] -> [N, K]."""
+    arr = _to_numpy(x, name)
+    if arr.ndim != 2:
+        raise ValueError(
+            f"{name} must be 2-D [rows, columns], got shape {arr.shape}"
+            + (" (reshape a single row with x.reshape(1, -1) or a column with x.reshape(-1, 1))"
+               if arr.ndim == 1 else "")
+        )
+    if arr.size == 0 and not allow_empty:
+        raise ValueError(f"{name} is empty (shape {arr.shape})")
+    _check_finite(arr, name)
+    return arr
+
+
+def check_data(data, name: str = "data", x_dim: Optional[int] = None,
+               y_dim: Optional[int] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """Check a regression data set ``(X [N, Din], Y [N, E])`` and return it as float64."""
+    if not isinstance(data, (tuple, list)) or len(data) != 2:
+        raise TypeError(f"{name} must be a pair (X, Y), got {type(data).__name__}")
+    X = as_2d_float(data[0], f"{name} X")
+    Y = as_2d_float(data[1], f"{name} Y")
+    if X.shape[0] != Y.shape[0]:
+        raise ValueError(
+            f"{name}: X and Y must have the same number of rows, got {X.shape[0]} and {Y.shape[0]}"
+        )
+    if x_dim is not None and X.shape[1] != x_dim:
+        raise ValueError(f"{name} X must have {x_dim} columns, got {X.shape[1]}")
+    if y_dim is not None and Y.shape[1] != y_dim:
+        raise ValueError(f"{name} Y must have {y_dim} columns, got {Y.shape[1]}")
+    return X, Y
+
+
+def check_covariance(s, dim: int, name: str) -> np.ndarray:
+    """A finite symmetric positive semi-definite [dim, dim] matrix, or a clear error."""
+    s = _to_numpy(s, name)
+    if s.ndim == 0 and dim == 1:
+        s = s.reshape(1, 1)
+    if s.shape != (dim, dim):
+        raise ValueError(f"{name} must have shape ({dim}, {dim}), got {s.shape}")
+    _check_finite(s, name)
+    scale = max(1.0, float(np.max(np.abs(s))))
+    if not np.allclose(s, s.T, rtol=1e-8, atol=1e-10 * scale):
+        raise ValueError(
+            f"{name} is not symmetric (max |s - s^T| = {np.max(np.abs(s - s.T)):.3g})"
+        )
+    lo = float(np.min(np.linalg.eigvalsh(0.5 * (s + s.T))))
+    if lo < -1e-9 * scale:
+        raise ValueError(
+            f"{name} is not positive semi-definite (smallest eigenvalue {lo:.3g})"
+        )
+    return s
+
+
+def check_gaussian(m, s, dim: int, name: str = "state"):
+    """Check a Gaussian ``N(m, s)`` of dimension ``dim``; returns float tensors.
+
+    Shapes: m [1, dim] (or [dim]), s [dim, dim] -> m [1, dim], s [dim, dim].
+    """
+    m = _to_numpy(m, f"{name} mean")
+    if m.ndim == 1:
+        m = m.reshape(1, -1)
+    if m.shape != (1, dim):
+        raise ValueError(f"{name} mean must have shape (1, {dim}), got {m.shape}")
+    _check_finite(m, f"{name} mean")
+    s = check_covariance(s, dim, f"{name} covariance")
+    return (tf.convert_to_tensor(m, dtype=default_float()),
+            tf.convert_to_tensor(s, dtype=default_float()))
+
+
+def check_positive_int(value, name: str) -> int:
+    """A strictly positive integer, or a clear error."""
+    if isinstance(value, bool) or not isinstance(value, (numbers.Integral, np.integer)):
+        if isinstance(value, float) and float(value).is_integer():
+            value = int(value)
+        else:
+            raise TypeError(f"{name} must be a positive integer, got {value!r}")
+    if value <= 0:
+        raise ValueError(f"{name} must be a positive integer, got {value}")
+    return int(value)
+
+
+def check_max_action(max_action, control_dim: int) -> np.ndarray:
+    """Action bounds as a float64 vector [control_dim] of positive finite values."""
+    arr = _to_numpy(max_action, "max_action").reshape(-1)
+    if arr.size == 1:
+        arr = np.repeat(arr, control_dim)
+    if arr.size != control_dim:
+        raise ValueError(
+            f"max_action must be a scalar or have {control_dim} entries, got {arr.size}"
+        )
+    _check_finite(arr, "max_action")
+    if np.any(arr <= 0):
+        raise ValueError(f"max_action must be positive, got {arr}")
+    return arr
