@@ -1,0 +1,69 @@
+"""Gymnasium environments of the PILCO experiments.
+
+Importing this package registers (once; importing again is harmless):
+
+- ``pilco/CartPoleSwingUp-v0``: :class:`CartPoleSwingUp`, 40 steps of 0.1 s.
+- ``pilco/FetchJointReacher-v0``: :class:`FetchJointReacher`, healthy arm, 50 steps.
+- ``pilco/FetchJointReacherDamaged-v0``: the same with the elbow forced to 0 rad
+  (``damaged_joints=("elbow_flex",)``, ``damage_mode="zero"``).
+
+The episode horizon of the registered ids is enforced by gymnasium's ``TimeLimit``
+wrapper (``env.spec.max_episode_steps``; override with
+``gymnasium.make(id, max_episode_steps=N)``); the envs' own limit is disabled there.
+
+Importing this package does not import mujoco or gymnasium-robotics; the Fetch env
+imports them when constructed.
+"""
+from __future__ import annotations
+
+import logging
+
+import gymnasium
+
+from pilco.envs.cartpole import CartPoleSwingUp
+from pilco.envs.fetch_reacher import ARM_JOINTS, FetchJointReacher
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "ARM_JOINTS",
+    "CARTPOLE_ID",
+    "CartPoleSwingUp",
+    "FETCH_DAMAGED_ID",
+    "FETCH_ID",
+    "FetchJointReacher",
+    "register_envs",
+]
+
+CARTPOLE_ID = "pilco/CartPoleSwingUp-v0"
+FETCH_ID = "pilco/FetchJointReacher-v0"
+FETCH_DAMAGED_ID = "pilco/FetchJointReacherDamaged-v0"
+
+_SPECS = (
+    (CARTPOLE_ID, "pilco.envs.cartpole:CartPoleSwingUp", 40, {}),
+    (FETCH_ID, "pilco.envs.fetch_reacher:FetchJointReacher", 50, {}),
+    (
+        FETCH_DAMAGED_ID,
+        "pilco.envs.fetch_reacher:FetchJointReacher",
+        50,
+        {"damaged_joints": ("elbow_flex",), "damage_mode": "zero"},
+    ),
+)
+
+
+def register_envs() -> None:
+    """Register the environments with gymnasium (skips ids already registered)."""
+    for env_id, entry_point, steps, kwargs in _SPECS:
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point=entry_point,
+            max_episode_steps=steps,
+            # TimeLimit does the truncation; keep a single source of the horizon.
+            kwargs={"max_episode_steps": None, **kwargs},
+        )
+        logger.debug("Registered %s", env_id)
+
+
+register_envs()
