@@ -107,6 +107,7 @@ class PILCO(gpflow.base.Module):
         self._horizon = tf.Variable(check_positive_int(horizon, "horizon"), trainable=False,
                                     dtype=tf.int32, name="horizon")
 
+        self.num_induced_points = num_induced_points
         self._raw_X, self._raw_Y = X, Y
         gp_data = (self.gp_inputs(X), Y)
         if num_induced_points is None:
@@ -400,3 +401,23 @@ class PILCO(gpflow.base.Module):
         if x.shape != (1, self.state_dim):
             raise ValueError(f"state must have shape (1, {self.state_dim}), got {x.shape}")
         return self._act(tf.convert_to_tensor(x)).numpy()
+
+    # -- persistence ------------------------------------------------------------------------
+    def save(self, path) -> None:
+        """Write everything needed to continue learning to ``path`` (atomically)."""
+        from ..persistence import save_agent
+
+        save_agent(self, path)
+
+    @classmethod
+    def load(cls, path) -> "PILCO":
+        """Rebuild an agent written by :meth:`save`."""
+        from ..persistence import load_agent
+
+        return load_agent(path)
+
+    def export_policy(self, path) -> None:
+        """Write the trained policy to a small ``.npz`` for :func:`pilco.deploy.load_policy`."""
+        from ..persistence import export_policy
+
+        export_policy(self, path)
