@@ -11,6 +11,12 @@ Hyperparameter safety (documented defaults):
   matrix singular;
 - hyperparameters start from the data: lengthscales at the inputs' standard deviations,
   signal variance at the targets' variance, noise variance at 1% of it;
+- the evidence is penalised as MATLAB PILCO's training does, so that the signal-to-noise
+  ratio ``sf / sn`` stays below ``max_snr`` (default 500) and every lengthscale within a
+  factor ``max_lengthscale_ratio`` (default 100) of its input's standard deviation: the
+  penalty ``((log a - log b) / log bound)^30`` is negligible inside the bound and steep
+  outside. Without it a noise-free target drives ``sn`` to the floor and ``sf`` up, and
+  moment matching loses its precision (``sf^2 - tr(K^-1 Q)`` cancels);
 - a Cholesky failure during training is caught: the best values seen so far are
   restored, the noise is raised, and a warning is logged.
 """
@@ -23,9 +29,9 @@ import gpflow
 import numpy as np
 import tensorflow as tf
 from gpflow.config import default_float
-from gpflow.utilities import multiple_assign, read_values
 
 from .. import moments
+from ..snapshots import restore, snapshot
 from ..validation import check_data, check_gaussian
 
 __all__ = ["MGPR"]
@@ -41,8 +47,14 @@ class MGPR(gpflow.base.Module):
     The data live in ``tf.Variable``s, so :meth:`set_data` never invalidates compiled code.
     """
 
-    def __init__(self, data, noise_floor: float = 1e-6, name: Optional[str] = None):
+    def __init__(self, data, noise_floor: float = 1e-6, max_snr: float = 500.0,
+                 max_lengthscale_ratio: float = 100.0, name: Optional[str] = None):
         super().__init__(name=name)
+        for label, v in (("max_snr", max_snr), ("max_lengthscale_ratio", max_lengthscale_ratio)):
+            if not (np.isfinite(v) and v > 1):
+                raise ValueError(f"{label} must be a finite number > 1, got {v}")
+        self.max_snr = float(max_snr)
+        self.max_lengthscale_ratio = float(max_lengthscale_ratio)
         X, Y = check_data(data, "data")
         if not noise_floor > 0:
             raise ValueError(f"noise_floor must be positive, got {noise_floor}")
@@ -143,11 +155,29 @@ class MGPR(gpflow.base.Module):
         return tf.concat(means, axis=1), tf.concat(vars_, axis=1)
 
     # -- training -------------------------------------------------------------------------
+    def _penalty(self, model) -> tf.Tensor:
+        """Soft bounds on the signal-to-noise ratio and the lengthscales (see module doc)."""
+        power = 30.0
+        X = tf.convert_to_tensor(self._X)
+        n = tf.cast(tf.shape(X)[0], X.dtype)
+        std = tf.sqrt(tf.reduce_sum(tf.square(X - tf.reduce_mean(X, 0)), 0) / tf.maximum(n - 1.0, 1.0))
+        std = tf.maximum(std, 1e-6)
+        log_ell = tf.math.log(tf.convert_to_tensor(model.kernel.lengthscales))
+        ell_term = tf.reduce_sum(
+            ((log_ell - tf.math.log(std)) / np.log(self.max_lengthscale_ratio)) ** power
+        )
+        log_snr = 0.5 * (tf.math.log(tf.convert_to_tensor(model.kernel.variance))
+                         - tf.math.log(tf.convert_to_tensor(model.likelihood.variance)))
+        return ell_term + (log_snr / np.log(self.max_snr)) ** power
+
+    def _model_loss(self, model) -> tf.Tensor:
+        return model.training_loss() + self._penalty(model)
+
     def _model_losses(self) -> np.ndarray:
-        return np.array([float(m.training_loss().numpy()) for m in self.models])
+        return np.array([float(self._model_loss(m).numpy()) for m in self.models])
 
     def _training_loss(self):
-        return tf.add_n([m.training_loss() for m in self.models])
+        return tf.add_n([self._model_loss(m) for m in self.models])
 
     def log_marginal_likelihood(self) -> np.ndarray:
         """Log evidence of each output's GP, [E] (priors excluded)."""
@@ -178,8 +208,7 @@ class MGPR(gpflow.base.Module):
                 loss = float(np.sum(losses[idx]))
                 if np.isfinite(loss) and loss < best_losses[g]:
                     best_losses[g] = loss
-                    best_values[g] = {k: np.array(v, copy=True)
-                                      for k, v in read_values(module).items()}
+                    best_values[g] = snapshot(module)
 
         record()  # never end worse than where we started
         for r in range(restarts):
@@ -213,4 +242,4 @@ class MGPR(gpflow.base.Module):
     def _restore(groups, values):
         for (module, _), vals in zip(groups, values):
             if vals is not None:
-                multiple_assign(module, vals)
+                restore(module, vals)

@@ -25,10 +25,10 @@ import gpflow
 import numpy as np
 import tensorflow as tf
 from gpflow.config import default_float
-from gpflow.utilities import multiple_assign, read_values
 
 from .. import moments
 from ..angles import augment_state
+from ..snapshots import restore, snapshot
 from ..validation import (
     as_2d_float,
     check_covariance,
@@ -354,7 +354,7 @@ class PILCO(gpflow.base.Module):
                 return
             if np.isfinite(value) and value > best[0]:
                 best[0] = value
-                best[1] = {k: np.array(v, copy=True) for k, v in read_values(self.controller).items()}
+                best[1] = snapshot(self.controller)
 
         t0 = time.perf_counter()
         record()
@@ -371,10 +371,10 @@ class PILCO(gpflow.base.Module):
                 logger.warning("policy optimisation run %d failed (%s); keeping the best policy "
                                "so far", r, str(err).splitlines()[0][:120])
                 if best[1] is not None:
-                    multiple_assign(self.controller, best[1])
+                    restore(self.controller, best[1])
             record()
         if best[1] is not None:
-            multiple_assign(self.controller, best[1])
+            restore(self.controller, best[1])
         logger.info("policy optimised in %.2f s: expected return %.4f -> %.4f",
                     time.perf_counter() - t0, start, best[0])
         return best[0]

@@ -29,10 +29,12 @@ class SMGPR(MGPR):
     """
 
     def __init__(self, data, num_induced_points: int, noise_floor: float = 1e-6,
+                 max_snr: float = 500.0, max_lengthscale_ratio: float = 100.0,
                  seed: Optional[int] = None, name: Optional[str] = None):
         self.num_induced_points = check_positive_int(num_induced_points, "num_induced_points")
         self._seed = seed
-        super().__init__(data, noise_floor=noise_floor, name=name)
+        super().__init__(data, noise_floor=noise_floor, max_snr=max_snr,
+                         max_lengthscale_ratio=max_lengthscale_ratio, name=name)
 
     def _build_models(self, X, Y):
         rng = np.random.default_rng(self._seed)
