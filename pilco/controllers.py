@@ -48,7 +48,10 @@ def _sin_moments(m, s, e):
 
 
 def _max_action_vector(max_action, size: int, dtype) -> tf.Tensor:
-    e = tf.reshape(tf.cast(tf.convert_to_tensor(max_action), dtype), [-1])
+    if not tf.is_tensor(max_action):  # numbers and arrays become one constant
+        return tf.constant(np.broadcast_to(np.asarray(max_action, dtype=np.float64).reshape(-1),
+                                           (size,)), dtype=dtype)
+    e = tf.reshape(tf.cast(max_action, dtype), [-1])
     return tf.broadcast_to(e, [size])
 
 
@@ -86,6 +89,16 @@ def squash_sat(m, s, max_action=None):
     return M, S, C
 
 
+def _check_squash(squash):
+    """A squashing function ``(m, s, max_action) -> (M, S, C)`` or None, or a clear error."""
+    if squash is not None and not callable(squash):
+        raise TypeError(
+            f"squash must be a function such as squash_sin or squash_sat (or None), got "
+            f"{squash!r}"
+        )
+    return squash
+
+
 class LinearController(gpflow.base.Module):
     """Affine policy ``u = squash(x W^T + b)``.
 
@@ -98,7 +111,7 @@ class LinearController(gpflow.base.Module):
         self.state_dim = check_positive_int(state_dim, "state_dim")
         self.control_dim = check_positive_int(control_dim, "control_dim")
         self.max_action = check_max_action(max_action, self.control_dim)
-        self.squash = squash
+        self.squash = _check_squash(squash)
         rng = np.random.default_rng(seed)
         self.W = Parameter(rng.uniform(-0.1, 0.1, (self.control_dim, self.state_dim)))
         self.b = Parameter(np.zeros((1, self.control_dim)))
@@ -108,7 +121,11 @@ class LinearController(gpflow.base.Module):
         m, s = check_gaussian(m, s, self.state_dim, "state")
         return self._action(m, s, squash)
 
-    def _action(self, m, s, squash=True):
+    def context(self):
+        """Per-evaluation pieces shared by many steps: none for a linear policy."""
+        return None
+
+    def _action(self, m, s, squash=True, ctx=None):
         W = tf.convert_to_tensor(self.W)
         M = tf.matmul(m, W, transpose_b=True) + self.b
         S = tf.matmul(W, tf.matmul(s, W, transpose_b=True))
@@ -158,7 +175,7 @@ class RbfController(gpflow.base.Module):
         self.control_dim = check_positive_int(control_dim, "control_dim")
         self.num_basis_functions = check_positive_int(num_basis_functions, "num_basis_functions")
         self.max_action = check_max_action(max_action, self.control_dim)
-        self.squash = squash
+        self.squash = _check_squash(squash)
         rng = np.random.default_rng(seed)
         self.centers = Parameter(rng.standard_normal((self.num_basis_functions, self.state_dim)))
         self.targets = Parameter(
@@ -168,6 +185,8 @@ class RbfController(gpflow.base.Module):
 
     def set_data(self, data):
         """Set centers [n, D] and targets [n, U] (``n`` must stay the same)."""
+        if not isinstance(data, (tuple, list)) or len(data) != 2:
+            raise TypeError(f"data must be a pair (centers, targets), got {type(data).__name__}")
         X, Y = data
         X = as_2d_float(X, "centers")
         Y = as_2d_float(Y, "targets")
@@ -204,10 +223,15 @@ class RbfController(gpflow.base.Module):
         m, s = check_gaussian(m, s, self.state_dim, "state")
         return self._action(m, s, squash)
 
-    def _action(self, m, s, squash=True, fact: Optional[moments.Factorization] = None):
-        if fact is None:
-            fact = self.factorize()
-        M, S, V = moments.moment_match(m, s, fact)
+    def context(self) -> moments.Predictor:
+        """Input-independent prediction pieces for the current parameters, computed once
+        per objective evaluation and shared by every step of a rollout."""
+        return moments.prepare(self.factorize())
+
+    def _action(self, m, s, squash=True, ctx: Optional[moments.Predictor] = None):
+        if ctx is None:
+            ctx = self.context()
+        M, S, V = moments.predict(m, s, ctx)
         if squash and self.squash is not None:
             M, S, C = self.squash(M, S, self.max_action)
             V = tf.matmul(V, C)

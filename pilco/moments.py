@@ -26,6 +26,9 @@ from gpflow.config import default_float
 
 __all__ = [
     "Factorization",
+    "Predictor",
+    "prepare",
+    "predict",
     "factorize",
     "fitc_factorize",
     "symmetric_pairs",
@@ -171,8 +174,144 @@ def pair_weights(beta: tf.Tensor, iK: Optional[tf.Tensor]) -> tf.Tensor:
     return W
 
 
-def _logdet_from_chol(L: tf.Tensor) -> tf.Tensor:
-    return 2.0 * tf.reduce_sum(tf.math.log(tf.linalg.diag_part(L)), axis=-1)
+@tf.custom_gradient
+def _weighted_exp_sum(leftT: tf.Tensor, rightT: tf.Tensor, W: tf.Tensor):
+    """``sum_ab W[p] * exp(leftT[p]^T rightT[p])`` per pair p, with ``W`` a constant.
+
+    Shapes: leftT [P, K, n], rightT [P, K, n], W [P, n, n] -> [P]. The product ``W * Q``
+    kept from the forward pass is all the backward pass needs (one n x n temporary per
+    pair instead of three); no gradient flows to ``W``.
+    """
+    WQ = W * tf.exp(tf.matmul(leftT, rightT, transpose_a=True))
+
+    def grad(g):
+        G = g[:, None, None] * WQ
+        return (tf.matmul(rightT, G, transpose_b=True), tf.matmul(leftT, G), None)
+
+    return tf.reduce_sum(WQ, axis=[1, 2]), grad
+
+
+class Predictor(NamedTuple):
+    """Everything of a moment-matching prediction that does not depend on the input.
+
+    Built by :func:`prepare` once (e.g. before a horizon loop) and used by :func:`predict`
+    at every step. With E outputs, n centers, input dimension D, P = E(E+1)/2 pairs:
+    ``XT`` [E, D, n] centers over lengthscales (transposed), ``iL`` [E, D] inverse
+    lengthscales, ``iLo`` [E, D, D] their outer products, ``beta`` [E, n],
+    ``sf2`` [E], ``XI``/``XJ`` [P, D, n] centers over squared lengthscales of each pair's
+    first/second output, ``iL2I``/``iL2J`` [P, D], ``sqPo`` [P, D, D] outer product of
+    ``sqrt(1/l_i^2 + 1/l_j^2)``, ``isqP`` [P, D] its inverse, ``betaI``/``betaJ`` [P, n],
+    ``W`` [P, n, n] pair weights or None, ``W_constant`` (no gradient flows to W) and
+    ``deterministic`` (Python bools).
+    """
+
+    XT: tf.Tensor
+    iL: tf.Tensor
+    iLo: tf.Tensor
+    beta: tf.Tensor
+    sf2: tf.Tensor
+    XI: tf.Tensor
+    XJ: tf.Tensor
+    iL2I: tf.Tensor
+    iL2J: tf.Tensor
+    sqPo: tf.Tensor
+    isqP: tf.Tensor
+    betaI: tf.Tensor
+    betaJ: tf.Tensor
+    W: Optional[tf.Tensor]
+    W_constant: bool
+    deterministic: bool
+
+
+def prepare(fact: Factorization, W: Optional[tf.Tensor] = None,
+            deterministic: Optional[bool] = None) -> Predictor:
+    """Input-independent pieces of :func:`predict` for a factorised GP.
+
+    ``W`` [P, n, n] (from :func:`pair_weights`) is treated as a constant; when omitted the
+    weights are formed from ``beta`` and ``iK`` with gradients flowing through them.
+    """
+    centers, beta, iK, ell, sf2 = fact
+    E = beta.shape[0]
+    I, J, _ = symmetric_pairs(E)
+    if deterministic is None:
+        deterministic = iK is None
+    iL = 1.0 / ell
+    iL2 = tf.square(iL)
+    XT = tf.transpose(centers)[None, :, :]  # [1, D, n]
+    iL2I = tf.gather(iL2, I)
+    iL2J = tf.gather(iL2, J)
+    sqP = tf.sqrt(iL2I + iL2J)
+    betaI = tf.gather(beta, I)
+    betaJ = tf.gather(beta, J)
+    W_constant = W is not None
+    if W is None and not deterministic:
+        W = pair_weights(beta, iK)
+    return Predictor(
+        XT=XT * iL[:, :, None], iL=iL, iLo=iL[:, :, None] * iL[:, None, :], beta=beta,
+        sf2=sf2, XI=XT * iL2I[:, :, None], XJ=XT * iL2J[:, :, None], iL2I=iL2I, iL2J=iL2J,
+        sqPo=sqP[:, :, None] * sqP[:, None, :], isqP=1.0 / sqP, betaI=betaI, betaJ=betaJ,
+        W=W, W_constant=W_constant, deterministic=bool(deterministic),
+    )
+
+
+def eye_like(s: tf.Tensor) -> tf.Tensor:
+    """Identity of the size of the square matrix ``s``: a constant when the size is static."""
+    n = s.shape[-1]
+    if n is not None:
+        return tf.constant(np.eye(n), dtype=s.dtype)
+    return tf.eye(tf.shape(s)[-1], dtype=s.dtype)
+
+
+def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: float = 1e-6):
+    """Moments of the E GP outputs at x ~ N(m, s), given :func:`prepare`'s pieces.
+
+    Shapes: m [1, D], s [D, D] -> M [1, E], S [E, E], V [D, E] (``V = inv(s) Cov[x, f]``).
+    """
+    E = pred.beta.shape[0]
+    I, J, index = symmetric_pairs(E)
+    eye = eye_like(s)
+
+    # Mean and inv(s) Cov[x, f(x)]: B = L^-1 s L^-1 + I per output.
+    iNT = pred.XT - (m * pred.iL)[:, :, None]  # (centers - m) / l, transposed, [E, D, n]
+    B = s * pred.iLo + eye
+    BiN = tf.linalg.solve(B, iNT)  # [E, D, n]
+    lb = tf.exp(-0.5 * tf.reduce_sum(iNT * BiN, axis=1)) * pred.beta  # [E, n]
+    c = pred.sf2 * tf.exp(-0.5 * tf.linalg.slogdet(B)[1])  # [E]
+    M = c * tf.reduce_sum(lb, axis=-1)
+    V = (c[:, None] * pred.iL) * tf.linalg.matvec(BiN, lb)  # [E, D]
+
+    # Second moments of each output pair (i <= j).
+    k = tf.math.log(pred.sf2)[:, None] - 0.5 * tf.reduce_sum(tf.square(iNT), axis=1)  # [E, n]
+    iiI = pred.XI - (m * pred.iL2I)[:, :, None]  # (centers - m) / l_i^2, [P, D, n]
+    iiJ = pred.XJ - (m * pred.iL2J)[:, :, None]
+    # With A = P^1/2 s P^1/2 + I (P = 1/l_i^2 + 1/l_j^2): R = s P + I has det R = det A
+    # and R^-1 s = P^-1/2 (I - A^-1) P^-1/2 =: T, symmetric.
+    A = s * pred.sqPo + eye
+    T = (eye - tf.linalg.inv(A)) * (pred.isqP[:, :, None] * pred.isqP[:, None, :])
+    tP = tf.exp(-0.5 * tf.linalg.slogdet(A)[1])  # [P]
+    aI = tf.matmul(T, iiI)
+    aJ = tf.matmul(T, iiJ)
+    u = tf.gather(k, I) + 0.5 * tf.reduce_sum(aI * iiI, axis=1)  # [P, n]
+    v = tf.gather(k, J) + 0.5 * tf.reduce_sum(aJ * iiJ, axis=1)
+    ones = tf.ones_like(u)[:, None, :]
+    # exponent_ab = u_a + v_b + iiI_a^T T iiJ_b as one product of augmented factors
+    leftT = tf.concat([aI, u[:, None, :], ones], axis=1)  # [P, D + 2, n]
+    rightT = tf.concat([iiJ, ones, v[:, None, :]], axis=1)
+    if pred.deterministic:
+        Q = tf.exp(tf.matmul(leftT, rightT, transpose_a=True))  # [P, n, n]
+        raw = tf.reduce_sum(pred.betaI * tf.linalg.matvec(Q, pred.betaJ), axis=-1)
+    elif pred.W_constant:
+        raw = _weighted_exp_sum(leftT, rightT, pred.W)
+    else:
+        Q = tf.exp(tf.matmul(leftT, rightT, transpose_a=True))
+        raw = tf.einsum("pab,pab->p", Q, pred.W)
+    S = tf.gather(tP * raw, index)  # [E, E]
+    if pred.deterministic:
+        S += tf.constant(deterministic_jitter * np.eye(E), dtype=S.dtype)
+    else:
+        S += tf.linalg.diag(pred.sf2)
+    S -= M[:, None] * M[None, :]
+    return M[None, :], S, tf.transpose(V)
 
 
 def moment_match(
@@ -186,66 +325,13 @@ def moment_match(
     """Mean, covariance and input-output covariance of E GPs at x ~ N(m, s).
 
     Shapes: m [1, D], s [D, D], ``fact`` from :func:`factorize` (or :func:`fitc_factorize`),
-    optional ``W`` [P, n, n] from :func:`pair_weights` (computed here when omitted)
+    optional ``W`` [P, n, n] from :func:`pair_weights`, precomputed by the caller and then
+    treated as a constant (no gradient flows to it; computed here when omitted)
     -> M [1, E], S [E, E], V [D, E] with ``V = inv(s) Cov[x, f(x)]``.
 
-    For a deterministic GP (``deterministic``, by default ``fact.iK is None``) the covariance holds no model
-    uncertainty and ``deterministic_jitter`` is added to its diagonal; otherwise the
-    latent variance ``sf^2 - tr(K^-1 Q)`` is included (observation noise is not).
+    For a deterministic GP (``deterministic``, by default ``fact.iK is None``) the
+    covariance holds no model uncertainty and ``deterministic_jitter`` is added to its
+    diagonal; otherwise the latent variance ``sf^2 - tr(K^-1 Q)`` is included
+    (observation noise is not).
     """
-    centers, beta, iK, ell, sf2 = fact
-    dtype = beta.dtype
-    D = tf.shape(centers)[1]
-    E = beta.shape[0]
-    eyeD = tf.eye(D, dtype=dtype)
-
-    inp = centers - m  # [n, D]
-    iL = 1.0 / ell  # [E, D]
-    iN = inp[None, :, :] * iL[:, None, :]  # [E, n, D]
-
-    # Mean and inv(s) Cov[x, f(x)].
-    B = iL[:, :, None] * s[None, :, :] * iL[:, None, :] + eyeD  # [E, D, D]
-    LB = tf.linalg.cholesky(B)
-    t = tf.linalg.adjoint(tf.linalg.cholesky_solve(LB, tf.linalg.adjoint(iN)))  # [E, n, D]
-    lb = tf.exp(-0.5 * tf.reduce_sum(iN * t, axis=-1)) * beta  # [E, n]
-    c = sf2 * tf.exp(-0.5 * _logdet_from_chol(LB))  # [E]
-    M = c * tf.reduce_sum(lb, axis=-1)  # [E]
-    V = c[:, None] * tf.einsum("end,en->ed", t * iL[:, None, :], lb)  # [E, D]
-
-    # Non-central second moments, one entry per symmetric output pair (i <= j).
-    I, J, index = symmetric_pairs(E)
-    k = tf.math.log(sf2)[:, None] - 0.5 * tf.reduce_sum(tf.square(iN), axis=-1)  # [E, n]
-    iL2 = tf.square(iL)
-    ii = inp[None, :, :] * iL2[:, None, :]  # [E, n, D]
-    Pd = tf.gather(iL2, I) + tf.gather(iL2, J)  # [P, D]
-    sqP = tf.sqrt(Pd)
-    # R = s diag(P) + I; det R = det(A) and R^-1 s = P^-1/2 A^-1 P^1/2 s with
-    # A = P^1/2 s P^1/2 + I symmetric positive definite.
-    A = sqP[:, :, None] * s[None] * sqP[:, None, :] + eyeD
-    LA = tf.linalg.cholesky(A)
-    T = tf.linalg.cholesky_solve(LA, sqP[:, :, None] * s[None]) / sqP[:, :, None]
-    T = 0.5 * (T + tf.linalg.adjoint(T))  # [P, D, D]
-    tP = tf.exp(-0.5 * _logdet_from_chol(LA))  # [P]
-    iiI = tf.gather(ii, I)
-    iiJ = tf.gather(ii, J)
-    aI = tf.matmul(iiI, T)  # [P, n, D]
-    aJ = tf.matmul(iiJ, T)
-    u = tf.gather(k, I) + 0.5 * tf.reduce_sum(aI * iiI, axis=-1)  # [P, n]
-    v = tf.gather(k, J) + 0.5 * tf.reduce_sum(aJ * iiJ, axis=-1)
-    ones = tf.ones_like(u)[:, :, None]
-    # exponent_ab = u_a + v_b + iiI_a^T T iiJ_b as a single product of augmented factors
-    left = tf.concat([aI, u[:, :, None], ones], axis=-1)
-    right = tf.concat([iiJ, ones, v[:, :, None]], axis=-1)
-    Q = tf.exp(tf.matmul(left, right, transpose_b=True))  # [P, n, n]
-    if W is None:
-        W = pair_weights(beta, iK)
-    S_pairs = tP * tf.einsum("pab,pab->p", Q, W)  # [P]
-    S = tf.gather(S_pairs, index)  # [E, E]
-    if deterministic is None:
-        deterministic = iK is None
-    if deterministic:
-        S += deterministic_jitter * tf.eye(E, dtype=dtype)
-    else:
-        S += tf.linalg.diag(sf2)
-    S -= M[:, None] * M[None, :]
-    return M[None, :], S, tf.transpose(V)
+    return predict(m, s, prepare(fact, W, deterministic), deterministic_jitter)

@@ -14,7 +14,14 @@ import tensorflow as tf
 from gpflow.config import default_float
 
 from .angles import trig_moments
-from .validation import check_gaussian, check_positive_int, _to_numpy, _check_finite
+from .moments import eye_like
+from .validation import (
+    _check_finite,
+    _to_numpy,
+    check_gaussian,
+    check_positive_float,
+    check_positive_int,
+)
 
 __all__ = ["ExponentialReward", "LinearReward", "CombinedRewards", "CartPoleReward"]
 
@@ -24,8 +31,7 @@ def _exp_reward_moments(m, s, W, t):
 
     Shapes: m [1, D], s [D, D], W [D, D], t [1, D] -> mean [1, 1], variance [1, 1].
     """
-    D = tf.shape(s)[0]
-    eye = tf.eye(D, dtype=s.dtype)
+    eye = eye_like(s)
     d = m - t
     SW = tf.matmul(s, W)
     # W (I + s W)^-1, written through a solve with the transposed system
@@ -113,9 +119,14 @@ class CombinedRewards(_Reward):
     def __init__(self, state_dim: int, rewards: Sequence[_Reward], coefs=None):
         super().__init__()
         self.state_dim = check_positive_int(state_dim, "state_dim")
+        if not isinstance(rewards, (list, tuple)):
+            raise TypeError(f"rewards must be a list of rewards, got {type(rewards).__name__}")
         if len(rewards) == 0:
             raise ValueError("rewards must not be empty")
-        for r in rewards:
+        for i, r in enumerate(rewards):
+            if not (hasattr(r, "_reward") and hasattr(r, "state_dim")):
+                raise TypeError(f"rewards[{i}] must be a reward (such as ExponentialReward), "
+                                f"got {type(r).__name__}")
             if getattr(r, "state_dim", None) != self.state_dim:
                 raise ValueError(
                     f"every reward must have state_dim {self.state_dim}, got "
@@ -125,6 +136,7 @@ class CombinedRewards(_Reward):
         coefs = np.ones(len(rewards)) if coefs is None else _to_numpy(coefs, "coefs").reshape(-1)
         if coefs.size != len(rewards):
             raise ValueError(f"coefs must have {len(rewards)} entries, got {coefs.size}")
+        _check_finite(coefs, "coefs")
         self.coefs = gpflow.Parameter(coefs, trainable=False)
 
     def _reward(self, m, s):
@@ -150,11 +162,8 @@ class CartPoleReward(_Reward):
     def __init__(self, pendulum_length: float = 0.5, width: float = 0.25):
         super().__init__()
         self.state_dim = 4
-        for name, v in (("pendulum_length", pendulum_length), ("width", width)):
-            if not np.isfinite(v) or v <= 0:
-                raise ValueError(f"{name} must be positive and finite, got {v}")
-        self.pendulum_length = float(pendulum_length)
-        self.width = float(width)
+        self.pendulum_length = check_positive_float(pendulum_length, "pendulum_length")
+        self.width = check_positive_float(width, "width")
         l = self.pendulum_length
         Q = np.zeros((6, 6))
         Q[np.ix_([0, 4], [0, 4])] = np.outer([1.0, l], [1.0, l])  # (x + l sin θ)^2

@@ -6,6 +6,7 @@ Every check raises :class:`ValueError` (wrong values or shapes) or :class:`TypeE
 from __future__ import annotations
 
 import numbers
+from collections.abc import Iterable
 from typing import Optional, Tuple
 
 import numpy as np
@@ -19,6 +20,10 @@ __all__ = [
     "check_covariance",
     "check_positive_int",
     "check_max_action",
+    "check_positive_float",
+    "check_seed",
+    "check_bool",
+    "check_indices",
 ]
 
 
@@ -28,7 +33,15 @@ def _to_numpy(x, name: str) -> np.ndarray:
     if tf.is_tensor(x) or isinstance(x, tf.Variable):
         x = x.numpy() if hasattr(x, "numpy") else tf.convert_to_tensor(x).numpy()
     try:
-        arr = np.asarray(x, dtype=np.float64)
+        raw = np.asarray(x)
+    except (TypeError, ValueError) as err:  # e.g. ragged nested lists
+        raise TypeError(f"{name} must be an array of numbers: {err}") from None
+    kind = {"b": "booleans", "U": "strings", "S": "strings", "c": "complex numbers"}.get(
+        raw.dtype.kind)
+    if kind is not None:
+        raise TypeError(f"{name} must be an array of (real) numbers, got {kind}")
+    try:
+        arr = raw.astype(np.float64)
     except (TypeError, ValueError) as err:
         raise TypeError(f"{name} must be an array of numbers: {err}") from None
     return arr
@@ -102,7 +115,10 @@ def check_gaussian(m, s, dim: int, name: str = "state"):
     """Check a Gaussian ``N(m, s)`` of dimension ``dim``; returns float tensors.
 
     Shapes: m [1, dim] (or [dim]), s [dim, dim] -> m [1, dim], s [dim, dim].
+    TensorFlow inputs are checked by value and returned as tensors derived from the
+    originals, so a gradient tape watching them still connects to the outputs.
     """
+    m_in, s_in = m, s
     m = _to_numpy(m, f"{name} mean")
     if m.ndim == 1:
         m = m.reshape(1, -1)
@@ -110,8 +126,12 @@ def check_gaussian(m, s, dim: int, name: str = "state"):
         raise ValueError(f"{name} mean must have shape (1, {dim}), got {m.shape}")
     _check_finite(m, f"{name} mean")
     s = check_covariance(s, dim, f"{name} covariance")
-    return (tf.convert_to_tensor(m, dtype=default_float()),
-            tf.convert_to_tensor(s, dtype=default_float()))
+    f = default_float()
+    m_out = (tf.reshape(tf.cast(m_in, f), (1, dim)) if tf.is_tensor(m_in)
+             else tf.convert_to_tensor(m, dtype=f))
+    s_out = (tf.reshape(tf.cast(s_in, f), (dim, dim)) if tf.is_tensor(s_in)
+             else tf.convert_to_tensor(s, dtype=f))
+    return m_out, s_out
 
 
 def check_positive_int(value, name: str) -> int:
@@ -124,6 +144,50 @@ def check_positive_int(value, name: str) -> int:
     if value <= 0:
         raise ValueError(f"{name} must be a positive integer, got {value}")
     return int(value)
+
+
+def check_positive_float(value, name: str) -> float:
+    """A finite number > 0 (not a boolean or a string), or a clear error."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.number)):
+        raise TypeError(f"{name} must be a positive number, got {value!r}")
+    value = float(value)
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be a positive finite number, got {value}")
+    return value
+
+
+def check_seed(seed, name: str = "seed") -> Optional[int]:
+    """A random seed: None or a non-negative integer, or a clear error."""
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (numbers.Integral, np.integer)):
+        raise TypeError(f"{name} must be None or a non-negative integer, got {seed!r}")
+    if seed < 0:
+        raise ValueError(f"{name} must be None or a non-negative integer, got {seed}")
+    return int(seed)
+
+
+def check_bool(value, name: str) -> bool:
+    """A boolean (``True``/``False``, also NumPy's), or a clear error."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def check_indices(indices, dim: int, name: str) -> Tuple[int, ...]:
+    """Distinct integer indices into ``range(dim)``, or a clear error."""
+    if isinstance(indices, (str, bytes)) or not isinstance(indices, Iterable):
+        raise TypeError(f"{name} must be a sequence of integers, got {indices!r}")
+    out = []
+    for a in indices:
+        if isinstance(a, (bool, np.bool_)) or not isinstance(a, (numbers.Integral, np.integer)):
+            raise TypeError(f"{name} must hold integers, got {a!r}")
+        if not 0 <= a < dim:
+            raise ValueError(f"{name}: index {int(a)} is outside the state (dimension {dim})")
+        out.append(int(a))
+    if len(set(out)) != len(out):
+        raise ValueError(f"{name} has duplicates: {out}")
+    return tuple(out)
 
 
 def check_max_action(max_action, control_dim: int) -> np.ndarray:

@@ -30,11 +30,15 @@ from .. import moments
 from ..angles import augment_state
 from ..snapshots import restore, snapshot
 from ..validation import (
+    _to_numpy,
     as_2d_float,
+    check_bool,
     check_covariance,
     check_data,
     check_gaussian,
+    check_indices,
     check_positive_int,
+    check_seed,
 )
 from .mgpr import MGPR
 from .smgpr import SMGPR
@@ -76,13 +80,7 @@ class PILCO(gpflow.base.Module):
                 f"data X must hold [state, action] with {D} state columns (from Y) and at "
                 f"least one action column, got {X.shape[1]} columns"
             )
-        angle_indices = [int(a) for a in angle_indices]
-        for a in angle_indices:
-            if not 0 <= a < D:
-                raise ValueError(f"angle index {a} is outside the state (dimension {D})")
-        if len(set(angle_indices)) != len(angle_indices):
-            raise ValueError(f"angle_indices has duplicates: {angle_indices}")
-        self.angle_indices = tuple(angle_indices)
+        self.angle_indices = check_indices(angle_indices, D, "angle_indices")
         self.feature_dim = D + len(self.angle_indices)
         for what, obj, want in (("controller", controller, self.feature_dim),
                                 ("reward", reward, D)):
@@ -103,7 +101,7 @@ class PILCO(gpflow.base.Module):
             )
         self.controller = controller
         self.reward = reward
-        self.policy_input_noise = bool(policy_input_noise)
+        self.policy_input_noise = check_bool(policy_input_noise, "policy_input_noise")
         self._horizon = tf.Variable(check_positive_int(horizon, "horizon"), trainable=False,
                                     dtype=tf.int32, name="horizon")
 
@@ -195,18 +193,15 @@ class PILCO(gpflow.base.Module):
         self._dyn_sf2.assign(fact.variance)
         self._dyn_noise.assign(self.mgpr.noise_variance)
 
-    def _dynamics(self):
+    def _dynamics(self) -> moments.Predictor:
+        """The cached dynamics GP as loop-invariant prediction pieces."""
         fact = moments.Factorization(
             tf.convert_to_tensor(self._dyn_centers), tf.convert_to_tensor(self._dyn_beta),
             None, tf.convert_to_tensor(self._dyn_ell), tf.convert_to_tensor(self._dyn_sf2),
         )
-        return fact, tf.convert_to_tensor(self._dyn_W)
+        return moments.prepare(fact, W=tf.convert_to_tensor(self._dyn_W), deterministic=False)
 
-    def _controller_context(self):
-        factorize = getattr(self.controller, "factorize", None)
-        return factorize() if factorize is not None else None
-
-    def _propagate(self, m, s, dyn, W, ctrl):
+    def _propagate(self, m, s, dyn, ctrl):
         """One moment-matched step: m [1, D], s [D, D] -> m' [1, D], s' [D, D]."""
         ang = self.angle_indices
         Mf, Sf, Cf = augment_state(m, s, ang)
@@ -215,16 +210,13 @@ class PILCO(gpflow.base.Module):
             Mp, Sp, _ = augment_state(m, noisy, ang)
         else:
             Mp, Sp = Mf, Sf
-        if ctrl is None:
-            Mu, Su, Cu = self.controller._action(Mp, Sp, True)
-        else:
-            Mu, Su, Cu = self.controller._action(Mp, Sp, True, fact=ctrl)
+        Mu, Su, Cu = self.controller._action(Mp, Sp, True, ctrl)
         cov_fu = tf.matmul(Sf, Cu)  # Cov[z, u], [F, U]
         m_in = tf.concat([Mf, Mu], axis=1)
         s_in = tf.concat(
             [tf.concat([Sf, cov_fu], 1), tf.concat([tf.transpose(cov_fu), Su], 1)], 0
         )
-        Md, Sd, Vd = moments.moment_match(m_in, s_in, dyn, W, deterministic=False)
+        Md, Sd, Vd = moments.predict(m_in, s_in, dyn)
         sCf = tf.matmul(s, Cf)  # Cov[x, z], [D, F]
         cov_x_in = tf.concat([sCf, tf.matmul(sCf, Cu)], axis=1)  # Cov[x, (z, u)]
         cov_xd = tf.matmul(cov_x_in, Vd)  # Cov[x, Δ], [D, D]
@@ -235,12 +227,12 @@ class PILCO(gpflow.base.Module):
     @tf.function
     def _total_reward(self, m0, s0, horizon):
         """Sum of expected rewards of steps 1..H, and the final state: compiled, in-graph loop."""
-        dyn, W = self._dynamics()
-        ctrl = self._controller_context()
+        dyn = self._dynamics()
+        ctrl = self.controller.context()
         D = self.state_dim
 
         def body(t, m, s, total):
-            m, s = self._propagate(m, s, dyn, W, ctrl)
+            m, s = self._propagate(m, s, dyn, ctrl)
             r, _ = self.reward._reward(m, s)
             return t + 1, m, s, total + r
 
@@ -255,8 +247,8 @@ class PILCO(gpflow.base.Module):
     @tf.function
     def _trajectory(self, m0, s0, horizon):
         """States 0..H and their reward moments: M [H+1, D], S [H+1, D, D], R, Rv [H+1]."""
-        dyn, W = self._dynamics()
-        ctrl = self._controller_context()
+        dyn = self._dynamics()
+        ctrl = self.controller.context()
         dtype = m0.dtype
         Ms = tf.TensorArray(dtype, size=horizon + 1)
         Ss = tf.TensorArray(dtype, size=horizon + 1)
@@ -266,7 +258,7 @@ class PILCO(gpflow.base.Module):
         Ms, Ss, Rs, Vs = Ms.write(0, m0[0]), Ss.write(0, s0), Rs.write(0, r0[0, 0]), Vs.write(0, v0[0, 0])
         m, s = m0, s0
         for t in tf.range(1, horizon + 1):
-            m, s = self._propagate(m, s, dyn, W, ctrl)
+            m, s = self._propagate(m, s, dyn, ctrl)
             r, v = self.reward._reward(m, s)
             Ms, Ss = Ms.write(t, m[0]), Ss.write(t, s)
             Rs, Vs = Rs.write(t, r[0, 0]), Vs.write(t, v[0, 0])
@@ -283,8 +275,7 @@ class PILCO(gpflow.base.Module):
         """One predicted step. Shapes: m [1, D], s [D, D] -> m' [1, D], s' [D, D]."""
         m, s = check_gaussian(m, s, self.state_dim, "state")
         self._refresh_dynamics()
-        dyn, W = self._dynamics()
-        return self._propagate(m, s, dyn, W, self._controller_context())
+        return self._propagate(m, s, self._dynamics(), self.controller.context())
 
     def predict(self, m=None, s=None, horizon: Optional[int] = None):
         """Predicted final state and total expected reward of steps 1..H.
@@ -339,12 +330,11 @@ class PILCO(gpflow.base.Module):
         one. The best policy seen is kept (never one worse than the starting policy); a
         run that fails numerically is logged and skipped. Returns the best total reward.
         """
-        if restarts < 1:
-            raise ValueError(f"restarts must be at least 1, got {restarts}")
-        check_positive_int(maxiter, "maxiter")
+        maxiter = check_positive_int(maxiter, "maxiter")
+        restarts = check_positive_int(restarts, "restarts")
+        rng = np.random.default_rng(check_seed(seed))
         self._refresh_dynamics()
         variables = self.controller.trainable_variables
-        rng = np.random.default_rng(seed)
         best = [-np.inf, None]
 
         def record():
@@ -386,18 +376,13 @@ class PILCO(gpflow.base.Module):
         Mf, _, _ = augment_state(x, tf.zeros([self.state_dim, self.state_dim], f),
                                  self.angle_indices)
         F = self.feature_dim
-        ctrl = self._controller_context()
-        zeros = tf.zeros([F, F], f)
-        if ctrl is None:
-            M, _, _ = self.controller._action(Mf, zeros, True)
-        else:
-            M, _, _ = self.controller._action(Mf, zeros, True, fact=ctrl)
+        M, _, _ = self.controller._action(Mf, tf.zeros([F, F], f), True)
         return M
 
     def compute_action(self, x) -> np.ndarray:
         """The policy's action at a measured state: x [1, D] (or [D]) -> u [1, U]."""
-        x = as_2d_float(np.reshape(np.asarray(x, dtype=np.float64), (1, -1))
-                        if np.ndim(x) == 1 else x, "state")
+        x = _to_numpy(x, "state")
+        x = as_2d_float(x.reshape(1, -1) if x.ndim == 1 else x, "state")
         if x.shape != (1, self.state_dim):
             raise ValueError(f"state must have shape (1, {self.state_dim}), got {x.shape}")
         return self._act(tf.convert_to_tensor(x)).numpy()

@@ -1,0 +1,160 @@
+"""Benchmark of PILCO's policy objective on the paper's problem sizes.
+
+Problems (built through the public API only):
+
+- ``reacher``: state 10, action 7, horizon 50, 50 RBF basis functions, 100 transitions
+  (the paper's Fetch reacher);
+- ``cartpole``: state 4 with one angle, action 1, horizon 40, 10 basis functions,
+  ``squash_sat``, :class:`CartPoleReward` and 40 transitions (the MATLAB release's
+  cart-pole after its random episode; ``--cartpole-data`` changes the count).
+
+For each it reports the time to trace and compile the objective and its gradient (first
+call of the function L-BFGS-B evaluates), the median seconds per objective + gradient
+over repeats, the seconds of ``optimize_policy(maxiter=10)`` in a fresh process
+(compilation included) and the peak resident memory of that process.
+
+Usage::
+
+    python benchmarks/bench_policy.py                   # both problems, table + JSON
+    python benchmarks/bench_policy.py --problem reacher --repeats 20 --json out.json
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+
+def build(problem: str, seed: int = 0, cartpole_data: int = 40):
+    """The agent of one benchmark problem, with GP hyperparameters fitted to its data."""
+    from pilco.controllers import RbfController, squash_sat, squash_sin
+    from pilco.models import PILCO
+    from pilco.rewards import CartPoleReward, ExponentialReward
+
+    rng = np.random.default_rng(seed)
+    if problem == "reacher":
+        D, U, N, H, nb = 10, 7, 100, 50, 50
+        A = rng.standard_normal((D + U, D)) / np.sqrt(D + U)
+        X = np.concatenate([rng.uniform(-1, 1, (N, D)), rng.uniform(-0.1, 0.1, (N, U))], 1)
+        Y = 0.1 * np.tanh(X @ A) + 1e-3 * rng.standard_normal((N, D))
+        ctrl = RbfController(D, U, nb, max_action=0.1, squash=squash_sin, seed=seed)
+        W = np.zeros((D, D))
+        W[:3, :3] = np.eye(3) / 0.2**2
+        reward = ExponentialReward(D, W=W, t=np.r_[1.2, 0.38, 0.38, np.zeros(D - 3)])
+        agent = PILCO((X, Y), ctrl, reward, horizon=H, m_init=X[:1, :D],
+                      S_init=1e-4 * np.eye(D))
+    elif problem == "cartpole":
+        D, U, N, H, nb = 4, 1, cartpole_data, 40, 10
+        X = np.concatenate([rng.normal(0, [0.5, 1.0, 2.0, 1.5], (N, D)),
+                            rng.uniform(-10, 10, (N, U))], 1)
+        Y = 0.1 * np.stack([X[:, 1], 0.5 * X[:, 4] - 0.1 * X[:, 1], -9 * np.sin(X[:, 3]),
+                            X[:, 2]], 1) + 0.01 * rng.standard_normal((N, D))
+        ctrl = RbfController(D + 1, U, nb, max_action=10.0, squash=squash_sat, seed=seed)
+        agent = PILCO((X, Y), ctrl, CartPoleReward(), horizon=H, m_init=np.zeros((1, D)),
+                      S_init=0.01 * np.eye(D), angle_indices=[3])
+    else:
+        raise ValueError(f"unknown problem {problem!r}")
+    for m in agent.mgpr.models:  # sensible fixed hyperparameters: timing does not need training
+        m.kernel.lengthscales.assign(np.std(agent.mgpr.X.numpy(), 0) + 0.5)
+        m.kernel.variance.assign(0.1)
+        m.likelihood.variance.assign(1e-3)
+    return agent
+
+
+def time_objective(problem: str, repeats: int, cartpole_data: int):
+    """Trace time and per-call seconds of the objective + gradient L-BFGS-B evaluates."""
+    import gpflow
+    import tensorflow as tf
+
+    agent = build(problem, cartpole_data=cartpole_data)
+    agent._refresh_dynamics()
+    variables = agent.controller.trainable_variables
+    opt = gpflow.optimizers.Scipy()
+    fn = opt.eval_func(agent._policy_loss, variables, tf_fun_args={}, compile=True)
+    x0 = opt.initial_parameters(variables).numpy()
+    t0 = time.perf_counter()
+    fn(x0)
+    trace = time.perf_counter() - t0
+    seconds = []
+    for i in range(repeats):
+        x = x0 + 1e-3 * np.random.default_rng(i).standard_normal(x0.shape)
+        t0 = time.perf_counter()
+        fn(x)
+        seconds.append(time.perf_counter() - t0)
+
+    @tf.function
+    def forward():
+        return agent._policy_loss()
+
+    forward()
+    fwd = []
+    for _ in range(max(3, repeats // 2)):
+        t0 = time.perf_counter()
+        forward().numpy()
+        fwd.append(time.perf_counter() - t0)
+    return {"trace_seconds": trace, "objective_gradient_seconds": float(np.median(seconds)),
+            "objective_gradient_min_seconds": float(np.min(seconds)),
+            "objective_seconds": float(np.median(fwd))}
+
+
+def optimize_fresh(problem: str, cartpole_data: int):
+    """optimize_policy(maxiter=10) in this (fresh) process; run via a subprocess."""
+    agent = build(problem, cartpole_data=cartpole_data)
+    t0 = time.perf_counter()
+    agent.optimize_policy(maxiter=10)
+    secs = time.perf_counter() - t0
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return {"optimize_policy_maxiter10_seconds": secs, "peak_memory_mb": peak_mb}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--problem", choices=["reacher", "cartpole", "all"], default="all")
+    parser.add_argument("--repeats", type=int, default=10)
+    parser.add_argument("--cartpole-data", type=int, default=40)
+    parser.add_argument("--json", default=None, help="write the results to this file")
+    parser.add_argument("--_fresh", default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+
+    if args._fresh:
+        print(json.dumps(optimize_fresh(args._fresh, args.cartpole_data)))
+        return 0
+
+    problems = ["reacher", "cartpole"] if args.problem == "all" else [args.problem]
+    results = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
+                           "python": platform.python_version()}, "problems": {}}
+    import tensorflow as tf
+
+    results["machine"]["tensorflow"] = tf.__version__
+    for problem in problems:
+        res = time_objective(problem, args.repeats, args.cartpole_data)
+        out = subprocess.run(
+            [sys.executable, __file__, "--_fresh", problem, "--cartpole-data", str(args.cartpole_data)],
+            capture_output=True, text=True, check=True,
+        )
+        res.update(json.loads(out.stdout.strip().splitlines()[-1]))
+        results["problems"][problem] = res
+
+    header = f"{'problem':<10} {'trace s':>8} {'obj+grad s':>11} {'obj s':>7} {'opt(10) s':>10} {'peak MB':>8}"
+    print(header)
+    print("-" * len(header))
+    for problem, r in results["problems"].items():
+        print(f"{problem:<10} {r['trace_seconds']:>8.2f} {r['objective_gradient_seconds']:>11.3f} "
+              f"{r['objective_seconds']:>7.3f} {r['optimize_policy_maxiter10_seconds']:>10.2f} "
+              f"{r['peak_memory_mb']:>8.0f}")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(results, fh, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
