@@ -191,6 +191,23 @@ def _weighted_exp_sum(leftT: tf.Tensor, rightT: tf.Tensor, W: tf.Tensor):
     return tf.reduce_sum(WQ, axis=[1, 2]), grad
 
 
+@tf.custom_gradient
+def _inv_logdet(A: tf.Tensor):
+    """Inverse and log-determinant of symmetric positive definite matrices.
+
+    Shapes: A [..., D, D] -> (A^-1 [..., D, D], log det A [...]). The backward pass
+    reuses the inverse for both outputs (d log det A = A^-1 : dA).
+    """
+    Ainv = tf.linalg.inv(A)
+    logdet = tf.linalg.slogdet(A)[1]
+
+    def grad(g_inv, g_logdet):
+        gA = -tf.matmul(Ainv, tf.matmul(g_inv, Ainv), transpose_a=True)
+        return gA + g_logdet[..., None, None] * tf.linalg.adjoint(Ainv)
+
+    return (Ainv, logdet), grad
+
+
 class Predictor(NamedTuple):
     """Everything of a moment-matching prediction that does not depend on the input.
 
@@ -200,7 +217,7 @@ class Predictor(NamedTuple):
     lengthscales, ``iLo`` [E, D, D] their outer products, ``beta`` [E, n],
     ``sf2`` [E], ``XI``/``XJ`` [P, D, n] centers over squared lengthscales of each pair's
     first/second output, ``iL2I``/``iL2J`` [P, D], ``sqPo`` [P, D, D] outer product of
-    ``sqrt(1/l_i^2 + 1/l_j^2)``, ``isqP`` [P, D] its inverse, ``betaI``/``betaJ`` [P, n],
+    ``sqrt(1/l_i^2 + 1/l_j^2)``, ``isqPo`` [P, D, D] that of its inverse, ``betaI``/``betaJ`` [P, n],
     ``W`` [P, n, n] pair weights or None, ``W_constant`` (no gradient flows to W) and
     ``deterministic`` (Python bools).
     """
@@ -215,7 +232,7 @@ class Predictor(NamedTuple):
     iL2I: tf.Tensor
     iL2J: tf.Tensor
     sqPo: tf.Tensor
-    isqP: tf.Tensor
+    isqPo: tf.Tensor
     betaI: tf.Tensor
     betaJ: tf.Tensor
     W: Optional[tf.Tensor]
@@ -249,7 +266,7 @@ def prepare(fact: Factorization, W: Optional[tf.Tensor] = None,
     return Predictor(
         XT=XT * iL[:, :, None], iL=iL, iLo=iL[:, :, None] * iL[:, None, :], beta=beta,
         sf2=sf2, XI=XT * iL2I[:, :, None], XJ=XT * iL2J[:, :, None], iL2I=iL2I, iL2J=iL2J,
-        sqPo=sqP[:, :, None] * sqP[:, None, :], isqP=1.0 / sqP, betaI=betaI, betaJ=betaJ,
+        sqPo=sqP[:, :, None] * sqP[:, None, :], isqPo=1.0 / (sqP[:, :, None] * sqP[:, None, :]), betaI=betaI, betaJ=betaJ,
         W=W, W_constant=W_constant, deterministic=bool(deterministic),
     )
 
@@ -273,26 +290,26 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
 
     # Mean and inv(s) Cov[x, f(x)]: B = L^-1 s L^-1 + I per output.
     iNT = pred.XT - (m * pred.iL)[:, :, None]  # (centers - m) / l, transposed, [E, D, n]
-    B = s * pred.iLo + eye
-    BiN = tf.linalg.solve(B, iNT)  # [E, D, n]
-    lb = tf.exp(-0.5 * tf.reduce_sum(iNT * BiN, axis=1)) * pred.beta  # [E, n]
-    c = pred.sf2 * tf.exp(-0.5 * tf.linalg.slogdet(B)[1])  # [E]
+    Binv, logdetB = _inv_logdet(s * pred.iLo + eye)
+    BiN = tf.matmul(Binv, iNT)  # [E, D, n]
+    lb = tf.exp(-0.5 * tf.einsum("edn,edn->en", iNT, BiN)) * pred.beta  # [E, n]
+    c = pred.sf2 * tf.exp(-0.5 * logdetB)  # [E]
     M = c * tf.reduce_sum(lb, axis=-1)
     V = (c[:, None] * pred.iL) * tf.linalg.matvec(BiN, lb)  # [E, D]
 
     # Second moments of each output pair (i <= j).
-    k = tf.math.log(pred.sf2)[:, None] - 0.5 * tf.reduce_sum(tf.square(iNT), axis=1)  # [E, n]
+    k = tf.math.log(pred.sf2)[:, None] - 0.5 * tf.einsum("edn,edn->en", iNT, iNT)  # [E, n]
     iiI = pred.XI - (m * pred.iL2I)[:, :, None]  # (centers - m) / l_i^2, [P, D, n]
     iiJ = pred.XJ - (m * pred.iL2J)[:, :, None]
     # With A = P^1/2 s P^1/2 + I (P = 1/l_i^2 + 1/l_j^2): R = s P + I has det R = det A
     # and R^-1 s = P^-1/2 (I - A^-1) P^-1/2 =: T, symmetric.
-    A = s * pred.sqPo + eye
-    T = (eye - tf.linalg.inv(A)) * (pred.isqP[:, :, None] * pred.isqP[:, None, :])
-    tP = tf.exp(-0.5 * tf.linalg.slogdet(A)[1])  # [P]
+    Ainv, logdetA = _inv_logdet(s * pred.sqPo + eye)
+    T = (eye - Ainv) * pred.isqPo
+    tP = tf.exp(-0.5 * logdetA)  # [P]
     aI = tf.matmul(T, iiI)
     aJ = tf.matmul(T, iiJ)
-    u = tf.gather(k, I) + 0.5 * tf.reduce_sum(aI * iiI, axis=1)  # [P, n]
-    v = tf.gather(k, J) + 0.5 * tf.reduce_sum(aJ * iiJ, axis=1)
+    u = tf.gather(k, I) + 0.5 * tf.einsum("pdn,pdn->pn", aI, iiI)  # [P, n]
+    v = tf.gather(k, J) + 0.5 * tf.einsum("pdn,pdn->pn", aJ, iiJ)
     ones = tf.ones_like(u)[:, None, :]
     # exponent_ab = u_a + v_b + iiI_a^T T iiJ_b as one product of augmented factors
     leftT = tf.concat([aI, u[:, None, :], ones], axis=1)  # [P, D + 2, n]

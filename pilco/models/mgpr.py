@@ -32,7 +32,13 @@ from gpflow.config import default_float
 
 from .. import moments
 from ..snapshots import restore, snapshot
-from ..validation import check_data, check_gaussian
+from ..validation import (
+    check_data,
+    check_gaussian,
+    check_positive_float,
+    check_positive_int,
+    check_seed,
+)
 
 __all__ = ["MGPR"]
 
@@ -51,14 +57,12 @@ class MGPR(gpflow.base.Module):
                  max_lengthscale_ratio: float = 100.0, name: Optional[str] = None):
         super().__init__(name=name)
         for label, v in (("max_snr", max_snr), ("max_lengthscale_ratio", max_lengthscale_ratio)):
-            if not (np.isfinite(v) and v > 1):
+            if not check_positive_float(v, label) > 1:
                 raise ValueError(f"{label} must be a finite number > 1, got {v}")
         self.max_snr = float(max_snr)
         self.max_lengthscale_ratio = float(max_lengthscale_ratio)
         X, Y = check_data(data, "data")
-        if not noise_floor > 0:
-            raise ValueError(f"noise_floor must be positive, got {noise_floor}")
-        self.noise_floor = float(noise_floor)
+        self.noise_floor = check_positive_float(noise_floor, "noise_floor")
         self.num_outputs = Y.shape[1]
         self.num_dims = X.shape[1]
         self._X = tf.Variable(X, shape=[None, self.num_dims], trainable=False, name="X")
@@ -191,26 +195,38 @@ class MGPR(gpflow.base.Module):
         best values of each output across runs are kept (copies of the values, not
         references to the live variables). Returns the final per-output losses [E].
         """
-        if restarts < 1:
-            raise ValueError(f"restarts must be at least 1, got {restarts}")
-        rng = np.random.default_rng(seed)
+        maxiter = check_positive_int(maxiter, "maxiter")
+        restarts = check_positive_int(restarts, "restarts")
+        rng = np.random.default_rng(check_seed(seed))
         opt = gpflow.optimizers.Scipy()
         groups = self._selection_groups()
         best_losses = [np.inf] * len(groups)
         best_values: List[Optional[Dict[str, np.ndarray]]] = [None] * len(groups)
 
         def record():
+            """Keep each group's best values; returns the groups whose loss is not finite."""
             try:
                 losses = self._model_losses()
             except tf.errors.InvalidArgumentError:
-                return
+                return list(range(len(groups)))
+            failed = []
             for g, (module, idx) in enumerate(groups):
                 loss = float(np.sum(losses[idx]))
-                if np.isfinite(loss) and loss < best_losses[g]:
+                if not np.isfinite(loss):
+                    failed.append(g)
+                elif loss < best_losses[g]:
                     best_losses[g] = loss
                     best_values[g] = snapshot(module)
+            return failed
 
-        record()  # never end worse than where we started
+        if record():  # never end worse than where we started
+            # A singular kernel matrix (Cholesky failure) gives a NaN loss that the optimiser
+            # cannot leave: start those outputs from data-driven values instead.
+            logger.warning("the starting GP hyperparameters fail numerically (non-finite "
+                           "loss); starting from data-driven values instead")
+            self.initialize_hyperparameters()
+            self._restore(groups, best_values)  # the outputs that were fine keep theirs
+            record()
         for r in range(restarts):
             if r > 0:
                 self.initialize_hyperparameters(rng, spread=0.5)
@@ -226,7 +242,11 @@ class MGPR(gpflow.base.Module):
                 for model in self.models:
                     v = float(model.likelihood.variance.numpy())
                     model.likelihood.variance.assign(max(10 * v, 100 * self.noise_floor))
-            record()
+            failed = record()
+            if failed:
+                logger.warning("GP training run %d ended at a non-finite loss (a numerically "
+                               "singular kernel matrix) for %d of %d output groups; keeping "
+                               "the best hyperparameters so far", r, len(failed), len(groups))
         self._restore(groups, best_values)
         logger.info("GP training done: losses %s", np.round(best_losses, 3))
         return self._model_losses()

@@ -18,6 +18,18 @@ __all__ = ["SMGPR"]
 logger = logging.getLogger(__name__)
 
 
+class _FITC(gpflow.models.GPRFITC):
+    """GPflow's FITC regression whose data count follows data held in resizable variables."""
+
+    @property
+    def num_data(self):
+        return tf.cast(tf.shape(self.data[0])[0], self.data[0].dtype)
+
+    @num_data.setter
+    def num_data(self, value):  # set by the parent constructor; the data decide
+        pass
+
+
 class SMGPR(MGPR):
     """E independent sparse GPs (FITC) sharing one set of inducing inputs ``Z [M, D]``.
 
@@ -43,7 +55,7 @@ class SMGPR(MGPR):
         Z = X[rows] + (1e-3 * rng.standard_normal((M, X.shape[1])) if len(X) < M else 0.0)
         self.inducing_variable = gpflow.inducing_variables.InducingPoints(Z)
         return [
-            gpflow.models.GPRFITC(
+            _FITC(
                 (self._X, self._Y[i]), kernel=self._new_kernel(),
                 inducing_variable=self.inducing_variable, likelihood=self._new_likelihood(),
             )

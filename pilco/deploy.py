@@ -1,0 +1,216 @@
+"""Evaluate an exported PILCO policy with NumPy alone: no TensorFlow or GPflow on the robot.
+
+Export a trained agent's policy with ``agent.export_policy("policy.npz")`` (or
+:func:`pilco.persistence.export_policy`), copy the file to the robot, then::
+
+    from pilco.deploy import load_policy
+
+    policy = load_policy("policy.npz")
+    u = policy(x)          # x [D] -> u [U]
+    U = policy(X)          # X [N, D] -> U [N, U]
+
+The action is the one :meth:`pilco.models.PILCO.compute_action` returns: the policy's
+prediction at a known state (zero variance), squashed with the squash function's moment
+formula. This module imports only the standard library and NumPy.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+from typing import Optional, Sequence
+
+import numpy as np
+
+__all__ = ["Policy", "load_policy"]
+
+logger = logging.getLogger(__name__)
+
+POLICY_FORMAT = "pilco-policy"
+POLICY_VERSION = 1
+META_KEY = "__meta__"
+
+_KINDS = ("rbf", "linear")
+_SQUASHES = ("sin", "sat", "none")
+
+
+def _matrix(value, shape, name: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != tuple(shape):
+        raise ValueError(f"policy {name} must have shape {tuple(shape)}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"policy {name} contains NaN or inf values")
+    return arr
+
+
+class Policy:
+    """A deterministic PILCO policy ``u = policy(x)`` evaluated with NumPy.
+
+    Args:
+        kind: ``"rbf"`` (RBF network / deterministic GP) or ``"linear"``.
+        squash: ``"sin"``, ``"sat"`` or ``"none"``.
+        state_dim: D, the size of the measured state.
+        angle_indices: state dimensions that are angles; the policy reads the features
+            ``[non-angle dims, sin θ1, cos θ1, sin θ2, cos θ2, ...]`` of size F = D + A.
+        max_action: action bounds [U] (or a scalar).
+        unsquashed_variance: variance of the unsquashed action at a known state (the
+            moment-matching jitter of the RBF policy; 0 for the linear one).
+        centers [n, F], beta [U, n], lengthscales [U, F], variance [U]: the RBF policy,
+            ``v_u(z) = variance_u * sum_i beta_ui exp(-|(z - c_i) / ell_u|^2 / 2)``.
+        W [U, F], b [1, U] (or [U]): the linear policy ``v(z) = W z + b``.
+    """
+
+    def __init__(self, kind: str, squash: str, state_dim: int, angle_indices: Sequence[int],
+                 max_action, unsquashed_variance: float = 0.0, centers=None, beta=None,
+                 lengthscales=None, variance=None, W=None, b=None):
+        if kind not in _KINDS:
+            raise ValueError(f"policy kind must be one of {_KINDS}, got {kind!r}")
+        if squash not in _SQUASHES:
+            raise ValueError(f"policy squash must be one of {_SQUASHES}, got {squash!r}")
+        self.kind = kind
+        self.squash = squash
+        self.state_dim = D = int(state_dim)
+        if D < 1:
+            raise ValueError(f"policy state_dim must be positive, got {D}")
+        self.angle_indices = tuple(int(a) for a in np.asarray(angle_indices).reshape(-1))
+        if any(not 0 <= a < D for a in self.angle_indices) or len(set(self.angle_indices)) != len(
+                self.angle_indices):
+            raise ValueError(f"policy angle_indices {self.angle_indices} are invalid for a "
+                             f"state of dimension {D}")
+        self._keep = [d for d in range(D) if d not in self.angle_indices]
+        self.feature_dim = F = D + len(self.angle_indices)
+        self.unsquashed_variance = float(unsquashed_variance)
+        if kind == "rbf":
+            beta = np.asarray(beta, dtype=np.float64)
+            if beta.ndim != 2:
+                raise ValueError(f"policy beta must be 2-D [U, n], got shape {beta.shape}")
+            U, n = beta.shape
+            self.beta = _matrix(beta, (U, n), "beta")
+            self.centers = _matrix(centers, (n, F), "centers")
+            self.lengthscales = _matrix(lengthscales, (U, F), "lengthscales")
+            self.variance = _matrix(variance, (U,), "variance")
+            self._inv_ell = 1.0 / self.lengthscales
+        else:
+            W = np.asarray(W, dtype=np.float64)
+            if W.ndim != 2:
+                raise ValueError(f"policy W must be 2-D [U, F], got shape {W.shape}")
+            U = W.shape[0]
+            self.W = _matrix(W, (U, F), "W")
+            self.b = _matrix(np.reshape(b, (1, -1)), (1, U), "b")
+        self.control_dim = U
+        e = np.asarray(max_action, dtype=np.float64).reshape(-1)
+        self.max_action = _matrix(np.broadcast_to(e, (U,)) if e.size == 1 else e, (U,),
+                                  "max_action")
+
+    def __repr__(self) -> str:
+        extra = f", {self.centers.shape[0]} basis functions" if self.kind == "rbf" else ""
+        return (f"Policy({self.kind}, squash={self.squash}, state_dim={self.state_dim}, "
+                f"control_dim={self.control_dim}, angle_indices={list(self.angle_indices)}"
+                f"{extra})")
+
+    # -- evaluation ------------------------------------------------------------------------
+    def _check_state(self, state) -> np.ndarray:
+        if isinstance(state, (str, bytes)) or state is None:
+            raise TypeError(f"state must be an array of numbers, got {type(state).__name__}")
+        try:
+            x = np.asarray(state, dtype=np.float64)
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"state must be an array of numbers: {err}") from None
+        if x.ndim not in (1, 2):
+            raise ValueError(f"state must have shape [{self.state_dim}] or "
+                             f"[N, {self.state_dim}], got {x.shape}")
+        if x.shape[-1] != self.state_dim:
+            raise ValueError(f"state must have {self.state_dim} entries per row (the policy's "
+                             f"state dimension), got shape {x.shape}")
+        if not np.all(np.isfinite(x)):
+            bad = tuple(int(i) for i in np.argwhere(~np.isfinite(x))[0])
+            raise ValueError(f"state contains NaN or inf (first at index {bad})")
+        return x
+
+    def features(self, states: np.ndarray) -> np.ndarray:
+        """Policy inputs: states [N, D] -> features [N, F] (angles as sin, cos pairs)."""
+        if not self.angle_indices:
+            return states
+        ang = states[:, list(self.angle_indices)]
+        trig = np.stack([np.sin(ang), np.cos(ang)], axis=-1).reshape(len(states), -1)
+        return np.concatenate([states[:, self._keep], trig], axis=1)
+
+    def unsquashed(self, features: np.ndarray) -> np.ndarray:
+        """Unsquashed actions: features [N, F] -> [N, U]."""
+        if self.kind == "linear":
+            return features @ self.W.T + self.b
+        out = np.empty((len(features), self.control_dim))
+        inp = self.centers[None, :, :] - features[:, None, :]  # [N, n, F]
+        for u in range(self.control_dim):
+            scaled = inp * self._inv_ell[u]
+            k = np.exp(-0.5 * np.sum(scaled * scaled, axis=-1))  # [N, n]
+            out[:, u] = self.variance[u] * (k @ self.beta[u])
+        return out
+
+    def squash_actions(self, v: np.ndarray) -> np.ndarray:
+        """Expected squashed action for v ~ N(v, unsquashed_variance): [N, U] -> [N, U]."""
+        e = self.max_action
+        s = self.unsquashed_variance
+        if self.squash == "sin":
+            return e * np.exp(-0.5 * s) * np.sin(v)
+        if self.squash == "sat":
+            return e / 8.0 * (9.0 * np.exp(-0.5 * s) * np.sin(v)
+                              + np.exp(-4.5 * s) * np.sin(3.0 * v))
+        return v
+
+    def __call__(self, state) -> np.ndarray:
+        """The action at a measured state: [D] -> [U], or a batch [N, D] -> [N, U]."""
+        x = self._check_state(state)
+        single = x.ndim == 1
+        X = x.reshape(1, -1) if single else x
+        u = self.squash_actions(self.unsquashed(self.features(X)))
+        return u[0] if single else u
+
+
+def load_policy(path) -> Policy:
+    """Read a policy file written by ``export_policy``; returns a callable :class:`Policy`.
+
+    ``policy(state)`` maps a state [D] to an action [U] (or a batch [N, D] to [N, U]).
+    """
+    path = os.fspath(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except FileNotFoundError:
+        raise
+    except (ValueError, OSError) as err:
+        raise ValueError(f"{path} is not a PILCO policy file: {err}") from None
+    if META_KEY not in arrays:
+        raise ValueError(f"{path} is not a PILCO policy file (no {META_KEY!r} entry)")
+    meta = json.loads(str(arrays[META_KEY]))
+    if meta.get("format") != POLICY_FORMAT:
+        raise ValueError(f"{path} holds format {meta.get('format')!r}, expected "
+                         f"{POLICY_FORMAT!r} (agent files are read with "
+                         f"pilco.persistence.load_agent)")
+    version = meta.get("version")
+    if not isinstance(version, int) or version > POLICY_VERSION:
+        raise ValueError(f"{path} has policy format version {version!r}; this reader supports "
+                         f"versions up to {POLICY_VERSION}")
+
+    def get(key: str, default: Optional[np.ndarray] = None):
+        if key in arrays:
+            return arrays[key]
+        if default is not None:
+            return default
+        raise ValueError(f"{path} is incomplete: entry {key!r} is missing")
+
+    kind = meta.get("kind")
+    common = dict(
+        kind=kind, squash=meta.get("squash"), state_dim=int(get("state_dim")),
+        angle_indices=get("angle_indices"), max_action=get("max_action"),
+        unsquashed_variance=float(get("unsquashed_variance", np.array(0.0))),
+    )
+    if kind == "rbf":
+        policy = Policy(centers=get("centers"), beta=get("beta"),
+                        lengthscales=get("lengthscales"), variance=get("variance"), **common)
+    elif kind == "linear":
+        policy = Policy(W=get("W"), b=get("b"), **common)
+    else:
+        raise ValueError(f"{path}: unknown policy kind {kind!r}")
+    logger.info("loaded %r from %s", policy, path)
+    return policy
