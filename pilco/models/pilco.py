@@ -337,12 +337,19 @@ class PILCO(gpflow.base.Module):
         variables = self.controller.trainable_variables
         best = [-np.inf, None]
 
-        def record():
+        def record(run=None):
             try:
                 value = float(-self._policy_loss().numpy())
-            except tf.errors.InvalidArgumentError:
+            except tf.errors.InvalidArgumentError as err:
+                logger.warning("policy evaluation failed (%s); keeping the best policy so far",
+                               str(err).splitlines()[0][:120])
                 return
-            if np.isfinite(value) and value > best[0]:
+            if not np.isfinite(value):
+                logger.warning("policy optimisation%s ended at a non-finite expected return; "
+                               "keeping the best policy so far",
+                               "" if run is None else f" run {run}")
+                return
+            if value > best[0]:
                 best[0] = value
                 best[1] = snapshot(self.controller)
 
@@ -362,7 +369,7 @@ class PILCO(gpflow.base.Module):
                                "so far", r, str(err).splitlines()[0][:120])
                 if best[1] is not None:
                     restore(self.controller, best[1])
-            record()
+            record(r)
         if best[1] is not None:
             restore(self.controller, best[1])
         logger.info("policy optimised in %.2f s: expected return %.4f -> %.4f",
