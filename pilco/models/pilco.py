@@ -48,6 +48,39 @@ __all__ = ["PILCO"]
 logger = logging.getLogger(__name__)
 
 
+class _GuardedScipy(gpflow.optimizers.Scipy):
+    """GPflow's L-BFGS-B whose objective answers a numerical failure with a huge value.
+
+    A trial point far out (a collapsed lengthscale, say) can make the rollout's linear
+    algebra fail or its value NaN. Reporting a very large loss there, instead of raising
+    or returning NaN, makes the line search step back and the run go on. Each such
+    point is counted in ``failures``.
+    """
+
+    PENALTY = 1e10
+
+    def __init__(self):
+        super().__init__()
+        self.failures = 0
+
+    def eval_func(self, closure, variables, tf_fun_args, compile=True,
+                  allow_unused_variables=False):
+        inner = super().eval_func(closure, variables, tf_fun_args, compile=compile,
+                                  allow_unused_variables=allow_unused_variables)
+
+        def guarded(x):
+            try:
+                loss, grad = inner(x)
+            except tf.errors.InvalidArgumentError:
+                loss, grad = np.nan, None
+            if not np.isfinite(loss) or grad is None or not np.all(np.isfinite(grad)):
+                self.failures += 1
+                return self.PENALTY, np.zeros_like(x)
+            return loss, grad
+
+        return guarded
+
+
 class PILCO(gpflow.base.Module):
     """The PILCO agent: GP dynamics model, policy, reward and horizon.
 
@@ -130,7 +163,7 @@ class PILCO(gpflow.base.Module):
         self._dyn_ell = tf.Variable(tf.ones([E, Din], f), trainable=False)
         self._dyn_sf2 = tf.Variable(tf.ones([E], f), trainable=False)
         self._dyn_noise = tf.Variable(tf.ones([E], f), trainable=False)
-        self._policy_optimizer = gpflow.optimizers.Scipy()
+        self._policy_optimizer = _GuardedScipy()
 
     # -- properties ---------------------------------------------------------------------
     @property
@@ -354,6 +387,7 @@ class PILCO(gpflow.base.Module):
                 best[1] = snapshot(self.controller)
 
         t0 = time.perf_counter()
+        self._policy_optimizer.failures = 0
         record()
         start = best[0]
         for r in range(restarts):
@@ -372,6 +406,10 @@ class PILCO(gpflow.base.Module):
             record(r)
         if best[1] is not None:
             restore(self.controller, best[1])
+        if self._policy_optimizer.failures:
+            logger.warning("policy optimisation met %d trial points where the rollout failed "
+                           "numerically; the line search stepped back from them",
+                           self._policy_optimizer.failures)
         logger.info("policy optimised in %.2f s: expected return %.4f -> %.4f",
                     time.perf_counter() - t0, start, best[0])
         return best[0]
