@@ -71,6 +71,7 @@ class MGPR(gpflow.base.Module):
             for i in range(self.num_outputs)
         ]
         self.models: List[gpflow.models.GPModel] = self._build_models(X, Y)
+        self._optimizer = gpflow.optimizers.Scipy()
         self.initialize_hyperparameters()
 
     # -- construction -------------------------------------------------------------------
@@ -93,7 +94,9 @@ class MGPR(gpflow.base.Module):
         """Data-driven starting values, optionally perturbed log-normally by ``spread``."""
         X = self._X.numpy()
         rng = rng or np.random.default_rng()
-        ell0 = np.maximum(np.std(X, axis=0), 1e-3) if len(X) > 1 else np.ones(self.num_dims)
+        ell0 = np.std(X, axis=0) if len(X) > 1 else np.ones(self.num_dims)
+        # a constant input (a joint that never moves) carries no scale: start it at 1
+        ell0 = np.where(ell0 > 1e-8, np.maximum(ell0, 1e-3), 1.0)
         for i, model in enumerate(self.models):
             y = self._Y[i].numpy()
             var = float(np.var(y)) if len(y) > 1 else 1.0
@@ -165,7 +168,9 @@ class MGPR(gpflow.base.Module):
         X = tf.convert_to_tensor(self._X)
         n = tf.cast(tf.shape(X)[0], X.dtype)
         std = tf.sqrt(tf.reduce_sum(tf.square(X - tf.reduce_mean(X, 0)), 0) / tf.maximum(n - 1.0, 1.0))
-        std = tf.maximum(std, 1e-6)
+        # constant inputs leave the evidence flat in their lengthscale: bound it around 1
+        # instead of pulling it towards a zero spread (which would make it ~1e-6)
+        std = tf.where(std > 1e-8, std, tf.ones_like(std))
         log_ell = tf.math.log(tf.convert_to_tensor(model.kernel.lengthscales))
         ell_term = tf.reduce_sum(
             ((log_ell - tf.math.log(std)) / np.log(self.max_lengthscale_ratio)) ** power
@@ -198,7 +203,7 @@ class MGPR(gpflow.base.Module):
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
         rng = np.random.default_rng(check_seed(seed))
-        opt = gpflow.optimizers.Scipy()
+        opt = self._optimizer  # one instance: its compiled objective is reused across calls
         groups = self._selection_groups()
         best_losses = [np.inf] * len(groups)
         best_values: List[Optional[Dict[str, np.ndarray]]] = [None] * len(groups)
