@@ -292,13 +292,13 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
     iNT = pred.XT - (m * pred.iL)[:, :, None]  # (centers - m) / l, transposed, [E, D, n]
     Binv, logdetB = _inv_logdet(s * pred.iLo + eye)
     BiN = tf.matmul(Binv, iNT)  # [E, D, n]
-    lb = tf.exp(-0.5 * tf.einsum("edn,edn->en", iNT, BiN)) * pred.beta  # [E, n]
+    lb = tf.exp(-0.5 * tf.reduce_sum(iNT * BiN, axis=1)) * pred.beta  # [E, n]
     c = pred.sf2 * tf.exp(-0.5 * logdetB)  # [E]
     M = c * tf.reduce_sum(lb, axis=-1)
     V = (c[:, None] * pred.iL) * tf.linalg.matvec(BiN, lb)  # [E, D]
 
     # Second moments of each output pair (i <= j).
-    k = tf.math.log(pred.sf2)[:, None] - 0.5 * tf.einsum("edn,edn->en", iNT, iNT)  # [E, n]
+    k = tf.math.log(pred.sf2)[:, None] - 0.5 * tf.reduce_sum(tf.square(iNT), axis=1)  # [E, n]
     iiI = pred.XI - (m * pred.iL2I)[:, :, None]  # (centers - m) / l_i^2, [P, D, n]
     iiJ = pred.XJ - (m * pred.iL2J)[:, :, None]
     # With A = P^1/2 s P^1/2 + I (P = 1/l_i^2 + 1/l_j^2): R = s P + I has det R = det A
@@ -308,8 +308,8 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
     tP = tf.exp(-0.5 * logdetA)  # [P]
     aI = tf.matmul(T, iiI)
     aJ = tf.matmul(T, iiJ)
-    u = tf.gather(k, I) + 0.5 * tf.einsum("pdn,pdn->pn", aI, iiI)  # [P, n]
-    v = tf.gather(k, J) + 0.5 * tf.einsum("pdn,pdn->pn", aJ, iiJ)
+    u = tf.gather(k, I) + 0.5 * tf.reduce_sum(aI * iiI, axis=1)  # [P, n]
+    v = tf.gather(k, J) + 0.5 * tf.reduce_sum(aJ * iiJ, axis=1)
     ones = tf.ones_like(u)[:, None, :]
     # exponent_ab = u_a + v_b + iiI_a^T T iiJ_b as one product of augmented factors
     leftT = tf.concat([aI, u[:, None, :], ones], axis=1)  # [P, D + 2, n]
