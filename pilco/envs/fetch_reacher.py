@@ -546,7 +546,21 @@ class FetchJointReacher(gymnasium.Env):
     # ----------------------------------------------------------------- render
     def render(self) -> np.ndarray | None:
         """Offscreen frame, ``uint8`` of shape ``(render_height, render_width, 3)`` in
-        ``"rgb_array"`` mode (the target is the red sphere), else ``None``."""
+        ``"rgb_array"`` mode (the target is the red sphere), else ``None``.
+
+        MuJoCo's EGL renderer and TensorFlow crash the process (a segmentation fault)
+        when both are used in it, so rendering refuses with a ``RuntimeError`` once
+        TensorFlow is imported: render in a process of its own, as
+        :func:`pilco.plotting.replay_fetch_frames` does from recorded joint angles.
+        """
+        if self.render_mode is not None and "tensorflow" in sys.modules and \
+                os.environ.get("PILCO_ALLOW_RENDER_WITH_TF") != "1":
+            raise RuntimeError(
+                "FetchJointReacher.render() in a process that imported TensorFlow would crash "
+                "(MuJoCo EGL + TensorFlow); render in a separate process, e.g. with "
+                "pilco.plotting.replay_fetch_frames (set PILCO_ALLOW_RENDER_WITH_TF=1 to try "
+                "anyway)"
+            )
         if self.render_mode is None:
             logger.warning(
                 "FetchJointReacher.render() called without a render_mode; "
