@@ -167,10 +167,10 @@ class Policy:
         return u[0] if single else u
 
 
-def load_policy(path) -> Policy:
-    """Read a policy file written by ``export_policy``; returns a callable :class:`Policy`.
+def read_npz(path, kind: str):
+    """Arrays and JSON metadata of a ``.npz`` written by pilco, or a clear ``ValueError``.
 
-    ``policy(state)`` maps a state [D] to an action [U] (or a batch [N, D] to [N, U]).
+    Returns (arrays without the metadata entry, metadata dict). No pickles are loaded.
     """
     path = os.fspath(path)
     try:
@@ -179,10 +179,19 @@ def load_policy(path) -> Policy:
     except FileNotFoundError:
         raise
     except (ValueError, OSError) as err:
-        raise ValueError(f"{path} is not a PILCO policy file: {err}") from None
+        raise ValueError(f"{path} is not a {kind} file written by pilco: {err}") from None
     if META_KEY not in arrays:
-        raise ValueError(f"{path} is not a PILCO policy file (no {META_KEY!r} entry)")
-    meta = json.loads(str(arrays[META_KEY]))
+        raise ValueError(f"{path} is not a {kind} file written by pilco (no {META_KEY!r} entry)")
+    return arrays, json.loads(str(arrays.pop(META_KEY)))
+
+
+def load_policy(path) -> Policy:
+    """Read a policy file written by ``export_policy``; returns a callable :class:`Policy`.
+
+    ``policy(state)`` maps a state [D] to an action [U] (or a batch [N, D] to [N, U]).
+    """
+    path = os.fspath(path)
+    arrays, meta = read_npz(path, "PILCO policy")
     if meta.get("format") != POLICY_FORMAT:
         raise ValueError(f"{path} holds format {meta.get('format')!r}, expected "
                          f"{POLICY_FORMAT!r} (agent files are read with "

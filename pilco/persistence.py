@@ -33,7 +33,7 @@ import numpy as np
 
 from . import __version__, moments
 from .controllers import LinearController, RbfController, squash_sat, squash_sin
-from .deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION
+from .deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
 from .models.mgpr import MGPR
 from .models.pilco import PILCO
 from .models.smgpr import SMGPR
@@ -89,18 +89,7 @@ def _atomic_savez(path, arrays: Dict[str, np.ndarray]) -> str:
 def _read_npz(path, expected_format: str):
     """Arrays and metadata of a file written by this module; clear errors otherwise."""
     path = os.fspath(path)
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except FileNotFoundError:
-        raise
-    except (ValueError, OSError) as err:
-        raise ValueError(
-            f"{path} is not a {expected_format} file written by pilco: {err}") from None
-    if META_KEY not in arrays:
-        raise ValueError(f"{path} is not a {expected_format} file written by pilco "
-                         f"(no {META_KEY!r} entry)")
-    meta = json.loads(str(arrays.pop(META_KEY)))
+    arrays, meta = read_npz(path, expected_format)
     if meta.get("format") != expected_format:
         raise ValueError(f"{path} holds format {meta.get('format')!r}, expected "
                          f"{expected_format!r}")
