@@ -35,6 +35,10 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+
+# TensorFlow's C++ log lines (CUDA probing, op errors the optimiser recovers from and logs
+# itself) drown the progress output; PILCO's own messages go through `logging`.
+os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 from typing import Optional, Sequence
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
