@@ -22,7 +22,6 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 import tensorflow as tf
-from gpflow.config import default_float
 
 __all__ = [
     "Factorization",
@@ -54,17 +53,23 @@ class Factorization(NamedTuple):
     variance: tf.Tensor
 
 
-def _scaled_sq_dist(X: tf.Tensor, lengthscales: tf.Tensor) -> tf.Tensor:
-    """[n, D], [E, D] -> [E, n, n] squared distances scaled by each output's lengthscales."""
+def _scaled_sq_dist(X: tf.Tensor, Z: tf.Tensor, lengthscales: tf.Tensor) -> tf.Tensor:
+    """[n, D], [m, D], [E, D] -> [E, n, m] squared distances scaled by each output's
+    lengthscales."""
     Xs = X[None, :, :] / lengthscales[:, None, :]
-    sq = tf.reduce_sum(tf.square(Xs), axis=-1)
-    d2 = sq[:, :, None] + sq[:, None, :] - 2.0 * tf.matmul(Xs, Xs, transpose_b=True)
+    Zs = Z[None, :, :] / lengthscales[:, None, :]
+    d2 = (tf.reduce_sum(tf.square(Xs), axis=-1)[:, :, None]
+          + tf.reduce_sum(tf.square(Zs), axis=-1)[:, None, :]
+          - 2.0 * tf.matmul(Xs, Zs, transpose_b=True))
     return tf.maximum(d2, 0.0)
 
 
-def se_kernel(X: tf.Tensor, lengthscales: tf.Tensor, variance: tf.Tensor) -> tf.Tensor:
-    """Squared-exponential kernel matrices: [n, D], [E, D], [E] -> [E, n, n]."""
-    return variance[:, None, None] * tf.exp(-0.5 * _scaled_sq_dist(X, lengthscales))
+def se_kernel(X: tf.Tensor, lengthscales: tf.Tensor, variance: tf.Tensor,
+              Z: Optional[tf.Tensor] = None) -> tf.Tensor:
+    """Squared-exponential kernel matrices k(X, Z) (Z defaults to X):
+    [n, D], [E, D], [E], [m, D] -> [E, n, m]."""
+    Z = X if Z is None else Z
+    return variance[:, None, None] * tf.exp(-0.5 * _scaled_sq_dist(X, Z, lengthscales))
 
 
 def factorize(
@@ -119,14 +124,7 @@ def fitc_factorize(
     E = tf.shape(lengthscales)[0]
     eye_m = tf.eye(m, batch_shape=[E], dtype=dtype)
     Kzz = se_kernel(Z, lengthscales, variance) + jitter * eye_m
-    Zs = Z[None] / lengthscales[:, None, :]
-    Xs = X[None] / lengthscales[:, None, :]
-    d2 = (
-        tf.reduce_sum(tf.square(Zs), -1)[:, :, None]
-        + tf.reduce_sum(tf.square(Xs), -1)[:, None, :]
-        - 2.0 * tf.matmul(Zs, Xs, transpose_b=True)
-    )
-    Kzx = variance[:, None, None] * tf.exp(-0.5 * tf.maximum(d2, 0.0))  # [E, m, n]
+    Kzx = se_kernel(Z, lengthscales, variance, X)  # [E, m, n]
     Lz = tf.linalg.cholesky(Kzz)
     A = tf.linalg.triangular_solve(Lz, Kzx, lower=True)  # Lz^-1 Kzx, [E, m, n]
     lam = variance[:, None] - tf.reduce_sum(tf.square(A), axis=1) + noise[:, None]  # [E, n]
