@@ -54,6 +54,7 @@ __all__ = [
     "saturating_cost",
     "format_timing_table",
     "sigterm_as_keyboard_interrupt",
+    "stop_requested",
     "add_common_arguments",
     "parse_args_with_resume",
     "write_json_atomic",
@@ -116,24 +117,50 @@ def persistence_available() -> bool:
 
 
 # --------------------------------------------------------------------------- signals
+#: number of the termination signal received inside ``sigterm_as_keyboard_interrupt``
+_stop_signal: Optional[int] = None
+
+
+def stop_requested() -> bool:
+    """True once SIGTERM arrived inside :func:`sigterm_as_keyboard_interrupt`."""
+    return _stop_signal is not None
+
+
+def raise_if_stop_requested() -> None:
+    """Raise ``KeyboardInterrupt`` if SIGTERM arrived inside
+    :func:`sigterm_as_keyboard_interrupt` (called at the run's safe points)."""
+    if _stop_signal is not None:
+        raise KeyboardInterrupt(f"signal {_stop_signal}")
+
+
 @contextlib.contextmanager
 def sigterm_as_keyboard_interrupt() -> Iterator[None]:
-    """Within the block, SIGTERM raises ``KeyboardInterrupt`` (restored afterwards).
+    """Within the block, SIGTERM stops the run like Ctrl-C, at the next safe point.
 
-    Only the main thread can install signal handlers; elsewhere this does nothing.
+    The handler only remembers the signal (:func:`stop_requested`); the run raises
+    ``KeyboardInterrupt`` at its next check (every environment step, every optimiser
+    iteration, between phases). An exception raised by the handler itself could land in
+    a library's finaliser or weak-reference callback, where Python drops it. The
+    previous handler is restored afterwards. Only the main thread can install signal
+    handlers; elsewhere this does nothing.
     """
+    global _stop_signal
+
     def handler(signum, frame):  # noqa: ARG001 - signal handler signature
-        raise KeyboardInterrupt(f"signal {signum}")
+        global _stop_signal
+        _stop_signal = signum
 
     try:
         previous = signal.signal(signal.SIGTERM, handler)
     except ValueError:  # not the main thread
         yield
         return
+    _stop_signal = None
     try:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+        _stop_signal = None
 
 
 # -------------------------------------------------------------------------- progress
@@ -144,37 +171,14 @@ def _bar(total: Optional[int], desc: str, quiet: bool, unit: str = "it"):
                 dynamic_ncols=True, file=sys.stderr)
 
 
-@contextlib.contextmanager
-def _count_optimizer_steps(bar) -> Iterator[None]:
-    """Tick ``bar`` once per L-BFGS iteration of every ``gpflow.optimizers.Scipy`` run.
+def _optimizer_callback(bar) -> Callable[[int], None]:
+    """``callback(iteration)`` for the optimisers: ticks ``bar`` and stops on SIGTERM."""
 
-    Both the dynamics-model and the policy optimisers are ``gpflow.optimizers.Scipy``
-    instances; their ``minimize`` is wrapped (for the block only) to pass a
-    ``step_callback``. Does nothing when the bar is disabled.
-    """
-    if bar.disable:
-        yield
-        return
-    import gpflow
+    def callback(iteration: int) -> None:  # noqa: ARG001 - one tick per iteration
+        bar.update(1)
+        raise_if_stop_requested()
 
-    scipy_cls = gpflow.optimizers.Scipy
-    original = scipy_cls.minimize
-
-    def minimize(self, closure, variables, *args, **kwargs):
-        user_callback = kwargs.pop("step_callback", None)
-
-        def callback(step, variables_, values):
-            bar.update(1)
-            if user_callback is not None:
-                user_callback(step, variables_, values)
-
-        return original(self, closure, variables, *args, step_callback=callback, **kwargs)
-
-    scipy_cls.minimize = minimize
-    try:
-        yield
-    finally:
-        scipy_cls.minimize = original
+    return callback
 
 
 # --------------------------------------------------------------------------- episodes
@@ -262,6 +266,7 @@ def rollout(env, policy_fn: Optional[Callable[[np.ndarray], np.ndarray]], steps:
     bar = _bar(steps, desc, quiet, unit="step")
     try:
         for _ in range(int(steps)):
+            raise_if_stop_requested()
             if random:
                 u = np.asarray(random_action(rng), dtype=np.float64).reshape(-1)
             else:
@@ -746,23 +751,27 @@ class Experiment:
                         "keeping its hyperparameters", number, cfg.max_data)
         else:
             with _bar(cfg.model_iters * cfg.model_restarts, f"episode {number} model",
-                      cfg.quiet) as bar, _count_optimizer_steps(bar):
+                      cfg.quiet) as bar:
                 self.agent.optimize_models(maxiter=cfg.model_iters,
-                                           restarts=cfg.model_restarts, seed=seed)
+                                           restarts=cfg.model_restarts, seed=seed,
+                                           callback=_optimizer_callback(bar))
                 if self.after_model_fit is not None:
                     self.after_model_fit(self.agent)
             self._model_fingerprint = fingerprint
         seconds["model"] = time.perf_counter() - t0
         cpu = {"model": time.process_time() - c0}
+        raise_if_stop_requested()
 
         t0, c0 = time.perf_counter(), time.process_time()
         with _bar(cfg.policy_iters * cfg.policy_restarts, f"episode {number} policy",
-                  cfg.quiet) as bar, _count_optimizer_steps(bar):
+                  cfg.quiet) as bar:
             expected = self.agent.optimize_policy(maxiter=cfg.policy_iters,
-                                                  restarts=cfg.policy_restarts, seed=seed)
+                                                  restarts=cfg.policy_restarts, seed=seed,
+                                                  callback=_optimizer_callback(bar))
         seconds["policy"] = time.perf_counter() - t0
         cpu["policy"] = time.process_time() - c0
         self.cpu_seconds[number] = cpu
+        raise_if_stop_requested()
         logger.info("episode %d: predicted return %.3f over %d steps", number, expected,
                     self.agent.horizon)
 
@@ -806,6 +815,9 @@ class Experiment:
             with sigterm_as_keyboard_interrupt():
                 try:
                     yield self
+                    # a SIGTERM after the last safe point: everything is saved already
+                    if stop_requested():
+                        self.interrupted = True
                 except KeyboardInterrupt:
                     self.interrupted = True
                     logger.warning("interrupted: saving the agent and %d episodes to %s",
@@ -827,6 +839,7 @@ class Experiment:
         with self.session():
             while len(self.episodes) < self.config.episodes:
                 self.run_episode()
+                raise_if_stop_requested()
         return self.summary()
 
     def close(self) -> None:

@@ -82,7 +82,8 @@ def test_restarts_never_end_worse_than_a_single_run_from_the_same_start():
     assert np.all(several <= single + 1e-8), (single, several)
     assert np.all(lml_several >= lml_single - 1e-6), (lml_single, lml_several)
     # from this start the restarts matter: otherwise the comparison proves nothing
-    assert np.all(lml_several > lml_single + 10.0), (lml_single, lml_several)
+    # (for at least one output; a single run may find the good optimum of another)
+    assert np.any(lml_several > lml_single + 10.0), (lml_single, lml_several)
     assert np.all(held_out_rmse(gp) < 0.1)
 
 

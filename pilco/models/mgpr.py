@@ -23,7 +23,7 @@ Hyperparameter safety (documented defaults):
 from __future__ import annotations
 
 import logging
-from typing import Dict, List, Optional
+from typing import Callable, Dict, List, Optional
 
 import gpflow
 import numpy as np
@@ -31,7 +31,7 @@ import tensorflow as tf
 from gpflow.config import default_float
 
 from .. import moments
-from ..snapshots import restore, snapshot
+from ..snapshots import restore, snapshot, step_callback
 from ..validation import (
     check_data,
     check_gaussian,
@@ -192,13 +192,16 @@ class MGPR(gpflow.base.Module):
         """Log evidence of each output's GP, [E] (priors excluded)."""
         return np.array([float(m.log_marginal_likelihood().numpy()) for m in self.models])
 
-    def optimize(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None):
+    def optimize(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
+                 callback: Optional[Callable[[int], None]] = None):
         """Maximise the evidence of every output's GP with L-BFGS-B (gpflow Scipy).
 
         The first run starts from the current hyperparameters; each further restart starts
         from data-driven values perturbed at random. The outputs are independent, so the
         best values of each output across runs are kept (copies of the values, not
-        references to the live variables). Returns the final per-output losses [E].
+        references to the live variables). ``callback(iteration)`` is called after every
+        L-BFGS iteration (progress bars; an exception it raises stops training). Returns
+        the final per-output losses [E].
         """
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
@@ -237,7 +240,8 @@ class MGPR(gpflow.base.Module):
                 self.initialize_hyperparameters(rng, spread=0.5)
             try:
                 opt.minimize(self._training_loss, self.trainable_variables,
-                             options=dict(maxiter=maxiter), method="L-BFGS-B")
+                             options=dict(maxiter=maxiter), method="L-BFGS-B",
+                             step_callback=step_callback(callback))
             except (tf.errors.InvalidArgumentError, ValueError) as err:
                 logger.warning(
                     "GP training run %d failed (%s); keeping the best hyperparameters so far "

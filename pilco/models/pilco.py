@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import gpflow
 import numpy as np
@@ -28,7 +28,7 @@ from gpflow.config import default_float
 
 from .. import moments
 from ..angles import augment_state
-from ..snapshots import restore, snapshot
+from ..snapshots import restore, snapshot, step_callback
 from ..validation import (
     _to_numpy,
     as_2d_float,
@@ -49,19 +49,29 @@ logger = logging.getLogger(__name__)
 
 
 class _GuardedScipy(gpflow.optimizers.Scipy):
-    """GPflow's L-BFGS-B whose objective answers a numerical failure with a huge value.
+    """GPflow's L-BFGS-B that survives numerical failures and remembers its best point.
 
     A trial point far out (a collapsed lengthscale, say) can make the rollout's linear
     algebra fail or its value NaN. Reporting a very large loss there, instead of raising
-    or returning NaN, makes the line search step back and the run go on. Each such
-    point is counted in ``failures``.
+    or returning NaN, makes the line search step back and the run go on; each such point
+    is counted in ``failures``. Every finite evaluation is compared with the best so far,
+    so the caller can restore the best parameters ever evaluated without spending extra
+    objective evaluations (or a separate forward-only compilation) on bookkeeping.
     """
 
     PENALTY = 1e10
 
     def __init__(self):
         super().__init__()
+        self.reset()
+
+    def reset(self):
+        """Forget the failures and the best point of earlier runs."""
         self.failures = 0
+        self.evaluations = 0
+        self.first_loss = None
+        self.best_loss = np.inf
+        self.best_x = None
 
     def eval_func(self, closure, variables, tf_fun_args, compile=True,
                   allow_unused_variables=False):
@@ -69,6 +79,7 @@ class _GuardedScipy(gpflow.optimizers.Scipy):
                                   allow_unused_variables=allow_unused_variables)
 
         def guarded(x):
+            self.evaluations += 1
             try:
                 loss, grad = inner(x)
             except tf.errors.InvalidArgumentError:
@@ -76,9 +87,22 @@ class _GuardedScipy(gpflow.optimizers.Scipy):
             if not np.isfinite(loss) or grad is None or not np.all(np.isfinite(grad)):
                 self.failures += 1
                 return self.PENALTY, np.zeros_like(x)
+            if self.first_loss is None:
+                self.first_loss = float(loss)
+            if loss < self.best_loss:
+                self.best_loss = float(loss)
+                self.best_x = np.array(x, dtype=np.float64, copy=True)
             return loss, grad
 
         return guarded
+
+    def restore_best(self, variables) -> bool:
+        """Assign the best point evaluated so far to ``variables``; False if there is none."""
+        if self.best_x is None:
+            return False
+        values = self.unpack_tensors(variables, tf.constant(self.best_x))
+        self.assign_tensors(variables, values)
+        return True
 
 
 class PILCO(gpflow.base.Module):
@@ -257,7 +281,7 @@ class PILCO(gpflow.base.Module):
         s_next = s + Sd + cov_xd + tf.transpose(cov_xd)
         return m_next, 0.5 * (s_next + tf.transpose(s_next))
 
-    @tf.function
+    @tf.function(autograph=False)
     def _total_reward(self, m0, s0, horizon):
         """Sum of expected rewards of steps 1..H, and the final state: compiled, in-graph loop."""
         dyn = self._dynamics()
@@ -277,25 +301,29 @@ class PILCO(gpflow.base.Module):
         )
         return m, s, total
 
-    @tf.function
+    @tf.function(autograph=False)
     def _trajectory(self, m0, s0, horizon):
         """States 0..H and their reward moments: M [H+1, D], S [H+1, D, D], R, Rv [H+1]."""
         dyn = self._dynamics()
         ctrl = self.controller.context()
+        D = self.state_dim
         dtype = m0.dtype
-        Ms = tf.TensorArray(dtype, size=horizon + 1)
-        Ss = tf.TensorArray(dtype, size=horizon + 1)
-        Rs = tf.TensorArray(dtype, size=horizon + 1)
-        Vs = tf.TensorArray(dtype, size=horizon + 1)
         r0, v0 = self.reward._reward(m0, s0)
-        Ms, Ss, Rs, Vs = Ms.write(0, m0[0]), Ss.write(0, s0), Rs.write(0, r0[0, 0]), Vs.write(0, v0[0, 0])
-        m, s = m0, s0
-        for t in tf.range(1, horizon + 1):
+        arrays = tuple(tf.TensorArray(dtype, size=horizon + 1) for _ in range(4))
+        arrays = tuple(a.write(0, x) for a, x in zip(arrays, (m0[0], s0, r0[0, 0], v0[0, 0])))
+
+        def body(t, m, s, Ms, Ss, Rs, Vs):
             m, s = self._propagate(m, s, dyn, ctrl)
             r, v = self.reward._reward(m, s)
-            Ms, Ss = Ms.write(t, m[0]), Ss.write(t, s)
-            Rs, Vs = Rs.write(t, r[0, 0]), Vs.write(t, v[0, 0])
-        return Ms.stack(), Ss.stack(), Rs.stack(), Vs.stack()
+            return (t + 1, m, s, Ms.write(t, m[0]), Ss.write(t, s), Rs.write(t, r[0, 0]),
+                    Vs.write(t, v[0, 0]))
+
+        out = tf.while_loop(
+            lambda t, *_: t <= horizon, body, (tf.constant(1), m0, s0) + arrays,
+            shape_invariants=(tf.TensorShape([]), tf.TensorShape([1, D]),
+                              tf.TensorShape([D, D])) + tuple(tf.TensorShape(None) for _ in arrays),
+        )
+        return tuple(a.stack() for a in out[3:])
 
     def _initial(self, m, s):
         if m is None:
@@ -337,10 +365,15 @@ class PILCO(gpflow.base.Module):
         return self._trajectory(m, s, tf.constant(H))
 
     # -- learning ---------------------------------------------------------------------------
-    def optimize_models(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None):
-        """Train the dynamics GPs by evidence maximisation; returns per-output losses [E]."""
+    def optimize_models(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
+                        callback: Optional[Callable[[int], None]] = None):
+        """Train the dynamics GPs by evidence maximisation; returns per-output losses [E].
+
+        ``callback(iteration)`` is called after every L-BFGS iteration.
+        """
         t0 = time.perf_counter()
-        losses = self.mgpr.optimize(maxiter=maxiter, restarts=restarts, seed=seed)
+        losses = self.mgpr.optimize(maxiter=maxiter, restarts=restarts, seed=seed,
+                                    callback=callback)
         logger.info("dynamics model trained in %.2f s", time.perf_counter() - t0)
         return losses
 
@@ -356,66 +389,60 @@ class PILCO(gpflow.base.Module):
         self._refresh_dynamics()
         return float(-self._policy_loss().numpy())
 
-    def optimize_policy(self, maxiter: int = 50, restarts: int = 1, seed: Optional[int] = None):
+    def optimize_policy(self, maxiter: int = 50, restarts: int = 1, seed: Optional[int] = None,
+                        callback: Optional[Callable[[int], None]] = None):
         """Maximise the predicted total reward over the policy parameters (L-BFGS-B).
 
         The first run starts from the current policy, each further restart from a random
-        one. The best policy seen is kept (never one worse than the starting policy); a
-        run that fails numerically is logged and skipped. Returns the best total reward.
+        one. The best policy evaluated by any run is kept (never one worse than the
+        starting policy, which is the first point evaluated); a run that fails numerically
+        is logged and the best policy so far restored. Returns the best total reward.
+
+        The objective and its gradient are one compiled function (the whole horizon
+        in-graph), traced on the first call and reused by later calls and restarts.
+        ``callback(iteration)`` is called after every L-BFGS iteration (progress bars;
+        an exception it raises, e.g. ``KeyboardInterrupt``, stops the optimisation).
         """
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
         rng = np.random.default_rng(check_seed(seed))
         self._refresh_dynamics()
         variables = self.controller.trainable_variables
-        best = [-np.inf, None]
-
-        def record(run=None):
-            try:
-                value = float(-self._policy_loss().numpy())
-            except tf.errors.InvalidArgumentError as err:
-                logger.warning("policy evaluation failed (%s); keeping the best policy so far",
-                               str(err).splitlines()[0][:120])
-                return
-            if not np.isfinite(value):
-                logger.warning("policy optimisation%s ended at a non-finite expected return; "
-                               "keeping the best policy so far",
-                               "" if run is None else f" run {run}")
-                return
-            if value > best[0]:
-                best[0] = value
-                best[1] = snapshot(self.controller)
+        opt = self._policy_optimizer
+        opt.reset()
+        start_values = snapshot(self.controller)
 
         t0 = time.perf_counter()
-        self._policy_optimizer.failures = 0
-        record()
-        start = best[0]
         for r in range(restarts):
             if r > 0:
                 self.controller.randomize(seed=int(rng.integers(2**31)))
             try:
-                self._policy_optimizer.minimize(
+                opt.minimize(
                     self._policy_loss, variables, method="L-BFGS-B",
-                    options=dict(maxiter=maxiter),
+                    options=dict(maxiter=maxiter), tf_fun_args=dict(autograph=False),
+                    step_callback=step_callback(callback),
                 )
             except (tf.errors.InvalidArgumentError, ValueError) as err:
                 logger.warning("policy optimisation run %d failed (%s); keeping the best policy "
                                "so far", r, str(err).splitlines()[0][:120])
-                if best[1] is not None:
-                    restore(self.controller, best[1])
-            record(r)
-        if best[1] is not None:
-            restore(self.controller, best[1])
-        if self._policy_optimizer.failures:
+        if not opt.restore_best(variables):
+            restore(self.controller, start_values)
+            logger.warning("policy optimisation evaluated no point where the expected return "
+                           "is finite; the starting policy is kept")
+            try:
+                return float(-self._policy_loss().numpy())
+            except tf.errors.InvalidArgumentError:
+                return -np.inf
+        if opt.failures:
             logger.warning("policy optimisation met %d trial points where the rollout failed "
-                           "numerically; the line search stepped back from them",
-                           self._policy_optimizer.failures)
-        logger.info("policy optimised in %.2f s: expected return %.4f -> %.4f",
-                    time.perf_counter() - t0, start, best[0])
-        return best[0]
+                           "numerically; the line search stepped back from them", opt.failures)
+        start = -np.inf if opt.first_loss is None else -opt.first_loss
+        logger.info("policy optimised in %.2f s (%d evaluations): expected return %.4f -> %.4f",
+                    time.perf_counter() - t0, opt.evaluations, start, -opt.best_loss)
+        return -opt.best_loss
 
     # -- acting -----------------------------------------------------------------------------
-    @tf.function
+    @tf.function(autograph=False)
     def _act(self, x):
         f = default_float()
         Mf, _, _ = augment_state(x, tf.zeros([self.state_dim, self.state_dim], f),
