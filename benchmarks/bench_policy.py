@@ -77,7 +77,8 @@ def time_objective(problem: str, repeats: int, cartpole_data: int):
     agent._refresh_dynamics()
     variables = agent.controller.trainable_variables
     opt = gpflow.optimizers.Scipy()
-    fn = opt.eval_func(agent._policy_loss, variables, tf_fun_args={}, compile=True)
+    fn = opt.eval_func(agent._policy_loss, variables, tf_fun_args=dict(autograph=False),
+                      compile=True)
     x0 = opt.initial_parameters(variables).numpy()
     t0 = time.perf_counter()
     fn(x0)

@@ -51,6 +51,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--hold-steps", type=int, default=10, help="... for the last N steps")
     g.add_argument("--squash", choices=("sat", "sin"), default="sat",
                    help="policy squashing function")
+    g.add_argument("--policy-input-noise", choices=("on", "off"), default="off",
+                   help="'on': the policy sees a noisy measurement of the predicted state "
+                        "(variance + half the dynamics noise), as the release's propagate.m")
+    g.add_argument("--policy-init", choices=("start", "random"), default="start",
+                   help="initial RBF policy: 'start' draws its centers from the start "
+                        "distribution as the MATLAB release does; 'random' from N(0, I)")
     return parser
 
 
@@ -66,9 +72,20 @@ def agent_builder(args):
         squash = squash_sat if args.squash == "sat" else squash_sin
         controller = RbfController(5, 1, args.basis_functions, args.max_force, squash,
                                    seed=args.seed)
+        if args.policy_init == "start":
+            # as the MATLAB release: centers drawn from the start distribution (policy
+            # input [x, dx, dtheta, sin theta, cos theta]), targets 0.1 N(0, 1),
+            # lengthscales (1, 1, 1, 0.7, 0.7)
+            rng = np.random.default_rng(args.seed)
+            x0 = args.start_std * rng.standard_normal((args.basis_functions, 4))
+            centers = np.column_stack([x0[:, :3], np.sin(x0[:, 3]), np.cos(x0[:, 3])])
+            targets = 0.1 * rng.standard_normal((args.basis_functions, 1))
+            controller.set_data((centers, targets))
+            controller.models[0].kernel.lengthscales.assign([1.0, 1.0, 1.0, 0.7, 0.7])
         return PILCO(data, controller, CartPoleReward(pendulum_length=0.5, width=args.cost_width),
                      horizon=args.horizon, m_init=np.zeros((1, 4)),
-                     S_init=args.start_std ** 2 * np.eye(4), angle_indices=[3])
+                     S_init=args.start_std ** 2 * np.eye(4), angle_indices=[3],
+                     policy_input_noise=args.policy_input_noise == "on")
 
     return build
 
