@@ -17,6 +17,7 @@ Usage::
 
     python benchmarks/bench_policy.py                   # both problems, table + JSON
     python benchmarks/bench_policy.py --problem reacher --repeats 20 --json out.json
+    python benchmarks/bench_policy.py --baseline      # also time naive_port.py's port
 """
 from __future__ import annotations
 
@@ -105,6 +106,45 @@ def time_objective(problem: str, repeats: int, cartpole_data: int):
             "objective_seconds": float(np.median(fwd))}
 
 
+def time_baseline(problem: str, repeats: int, cartpole_data: int):
+    """The same objective + gradient through ``naive_port`` (a straightforward port):
+    its agreement with the library, trace time, seconds per call, and the seconds of 10
+    L-BFGS-B iterations with it (compilation included)."""
+    import gpflow
+    import tensorflow as tf
+
+    from naive_port import make_objective
+
+    agent = build(problem, cartpole_data=cartpole_data)
+    agent._refresh_dynamics()
+    ours = float(agent._policy_loss().numpy())
+    loss = make_objective(agent)
+    variables = agent.controller.trainable_variables
+    opt = gpflow.optimizers.Scipy()
+    fn = opt.eval_func(loss, variables, tf_fun_args={}, compile=True)
+    x0 = opt.initial_parameters(variables).numpy()
+    t0 = time.perf_counter()
+    naive, _ = fn(x0)
+    trace = time.perf_counter() - t0
+    seconds = []
+    for i in range(repeats):
+        x = x0 + 1e-3 * np.random.default_rng(i).standard_normal(x0.shape)
+        t0 = time.perf_counter()
+        fn(x)
+        seconds.append(time.perf_counter() - t0)
+    Scipy = gpflow.optimizers.Scipy
+    Scipy.assign_tensors(variables, Scipy.unpack_tensors(variables, tf.constant(x0)))
+    fresh = build(problem, cartpole_data=cartpole_data)
+    fresh._refresh_dynamics()
+    t0 = time.perf_counter()
+    gpflow.optimizers.Scipy().minimize(make_objective(fresh), fresh.controller.trainable_variables,
+                                       method="L-BFGS-B", options=dict(maxiter=10))
+    return {"baseline_relative_difference": abs(float(naive) - ours) / abs(ours),
+            "baseline_trace_seconds": trace,
+            "baseline_objective_gradient_seconds": float(np.median(seconds)),
+            "baseline_optimize_maxiter10_seconds": time.perf_counter() - t0}
+
+
 def optimize_fresh(problem: str, cartpole_data: int):
     """optimize_policy(maxiter=10) in this (fresh) process; run via a subprocess."""
     agent = build(problem, cartpole_data=cartpole_data)
@@ -121,6 +161,9 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=10)
     parser.add_argument("--cartpole-data", type=int, default=40)
     parser.add_argument("--json", default=None, help="write the results to this file")
+    parser.add_argument("--baseline", action="store_true",
+                        help="also time the straightforward port in naive_port.py (reacher "
+                             "only: it has no angles)")
     parser.add_argument("--_fresh", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
@@ -142,6 +185,8 @@ def main(argv=None):
             capture_output=True, text=True, check=True,
         )
         res.update(json.loads(out.stdout.strip().splitlines()[-1]))
+        if args.baseline and problem == "reacher":
+            res.update(time_baseline(problem, max(3, args.repeats // 3), args.cartpole_data))
         results["problems"][problem] = res
 
     header = f"{'problem':<10} {'trace s':>8} {'obj+grad s':>11} {'obj s':>7} {'opt(10) s':>10} {'peak MB':>8}"
@@ -151,6 +196,15 @@ def main(argv=None):
         print(f"{problem:<10} {r['trace_seconds']:>8.2f} {r['objective_gradient_seconds']:>11.3f} "
               f"{r['objective_seconds']:>7.3f} {r['optimize_policy_maxiter10_seconds']:>10.2f} "
               f"{r['peak_memory_mb']:>8.0f}")
+    for problem, r in results["problems"].items():
+        if "baseline_objective_gradient_seconds" in r:
+            print(f"\nstraightforward port ({problem}): trace "
+                  f"{r['baseline_trace_seconds']:.1f} s, objective + gradient "
+                  f"{r['baseline_objective_gradient_seconds']:.2f} s "
+                  f"({r['baseline_objective_gradient_seconds'] / r['objective_gradient_seconds']:.1f}x"
+                  f" ours), 10 L-BFGS-B iterations {r['baseline_optimize_maxiter10_seconds']:.1f} s "
+                  f"({r['baseline_optimize_maxiter10_seconds'] / r['optimize_policy_maxiter10_seconds']:.1f}x"
+                  f" ours); same objective to {r['baseline_relative_difference']:.1e}")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(results, fh, indent=2)
