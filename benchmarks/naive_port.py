@@ -6,7 +6,7 @@ This is how PILCO is usually transcribed to TensorFlow, kept here only so that
 - every step of the horizon refactorises the dynamics GP (kernel matrix, Cholesky,
   ``beta``, ``K^-1``) and the policy's deterministic GP;
 - the E x E output covariance is computed on all E^2 pairs with tiled [E, E, n, n]
-  tensors, and each pair's exponent is formed by broadcasting (no folded products);
+  tensors, each pair's exponent as a broadcast sum of three terms;
 - the horizon is a ``tf.while_loop`` inside one ``tf.function``, differentiated by
   TensorFlow's automatic differentiation throughout.
 
@@ -54,13 +54,15 @@ def _gp_moments(m, s, X, Y, ell, sf2, sn2, deterministic):
     P = iL2[:, None, :] + iL2[None, :, :]  # [E, E, D]
     R = tf.matmul(tf.tile(s[None, None], [E, E, 1, 1]), tf.linalg.diag(P)) + tf.eye(D, dtype=X.dtype)
     detR = tf.linalg.det(R)
-    Xa = tf.tile((inp * iL2[:, None, :])[:, None, :, None, :], [1, E, 1, n, 1])  # [E,E,n,n,D]
-    Xb = tf.tile((inp * iL2[:, None, :])[None, :, None, :, :], [E, 1, n, 1, 1])
-    Z = Xa + Xb
-    Rs = tf.linalg.solve(R, tf.tile(s[None, None], [E, E, 1, 1]))  # R^-1 s, [E, E, D, D]
-    maha = tf.einsum("abijd,abde,abije->abij", Z, Rs, Z)  # [E, E, n, n]
+    ii = inp * iL2[:, None, :]  # (x - m) / l^2, [E, n, D]
+    Rs = 0.5 * tf.linalg.solve(R, tf.tile(s[None, None], [E, E, 1, 1]))  # R^-1 s / 2
+    a = tf.tile(ii[:, None], [1, E, 1, 1])  # [E, E, n, D]
+    b = tf.tile(ii[None, :], [E, 1, 1, 1])
+    aQ, bQ = tf.matmul(a, Rs), tf.matmul(b, Rs)
+    maha = (tf.reduce_sum(aQ * a, -1)[..., :, None] + tf.reduce_sum(bQ * b, -1)[..., None, :]
+            + 2.0 * tf.matmul(aQ, b, transpose_b=True))  # (a_i + b_j)^T R^-1 s (a_i + b_j) / 2
     k = tf.math.log(sf2)[:, None] - 0.5 * tf.reduce_sum(iN ** 2, -1)  # [E, n]
-    Q = tf.exp(k[:, None, :, None] + k[None, :, None, :] + 0.5 * maha)
+    Q = tf.exp(k[:, None, :, None] + k[None, :, None, :] + maha)
     S = tf.einsum("an,abnm,bm->ab", beta, Q, beta)
     if not deterministic:
         Qdiag = tf.gather_nd(Q, tf.stack([tf.range(E), tf.range(E)], axis=1))  # [E, n, n]
