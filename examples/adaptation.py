@@ -3,8 +3,10 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
 
 1. one random episode and up to ``--healthy-episodes`` learned episodes on the healthy
    arm, stopping as soon as an episode reaches the target;
-2. ``env.damage(--damaged-joints, --damage-mode)`` (the policy is not told); the start
-   state of the damaged arm becomes the agent's ``m_init``;
+2. ``env.damage(--damaged-joints, --damage-mode)`` (the policy is not told; by default
+   the elbow is stuck at its angle, ``--damage-mode zero`` straightens it as the paper's
+   damaged reacher does); the start state of the damaged arm becomes the agent's
+   ``m_init``;
 3. up to ``--damaged-episodes`` learned episodes with the same agent, policy and data
    (``--drop-old-data``: the model then learns from the damaged episodes only), stopping
    once it reaches again (unless ``--no-stop-when-recovered``).
@@ -33,7 +35,11 @@ import reacher  # noqa: E402 - the shared reacher settings
 def build_parser():
     parser = reacher.build_parser(damaged=False)
     parser.description = "PILCO on the Fetch reacher, adapting to a joint damaged mid-run"
-    parser.set_defaults(output="runs/adaptation-seed{seed}", episodes=None)
+    # the elbow breaks where it is (stuck at its start angle), so the arm starts where the
+    # healthy one did and the healthy cost width still applies; --damage-mode zero
+    # straightens it (1.17 m from the target: add --cost-width 0.4 then)
+    parser.set_defaults(output="runs/adaptation-seed{seed}", episodes=None,
+                        damage_mode="stuck")
     g = parser.add_argument_group("adaptation")
     g.add_argument("--healthy-episodes", type=int, default=4,
                    help="at most this many learned episodes before the damage")
