@@ -3,10 +3,11 @@
 Defaults follow the release (``settings_cp.m``) and the paper: 8 episodes in all (1 with
 random forces uniform in ±10 N, then 7 learned), horizon 40 steps of 0.1 s, start
 N(0, diag(0.1²)) (so ``m_init = 0``, ``S_init = 0.01 I``), angle θ fed to the GP and the
-policy as (sin θ, cos θ), an RBF policy of 10 basis functions with the saturating
-squashing to ±10 N, the saturating cost of the pendulum tip's distance to the upright
-target (width 0.25 m); the release optimises the policy with up to 150 line searches
-and trains the GPs with up to 300 (here: L-BFGS iterations).
+policy as (sin θ, cos θ), an RBF policy of 10 basis functions (centres drawn from the
+start distribution as the release does, ``--policy-init random`` for N(0, I)) with the
+saturating squashing to ±10 N, the saturating cost of the pendulum tip's distance to the
+upright target (width 0.25 m); the release optimises the policy with up to 150 line
+searches and trains the GPs with up to 300 (here: L-BFGS iterations).
 
 The run is "solved" when, in a learned episode, the tip stays within 0.1 m of the
 target for the last 10 steps.
