@@ -69,20 +69,17 @@ def build(problem: str, seed: int = 0, cartpole_data: int = 40):
     return agent
 
 
-def time_objective(problem: str, repeats: int, cartpole_data: int):
-    """Trace time and per-call seconds of the objective + gradient L-BFGS-B evaluates."""
+def _time_loss_and_gradient(loss, variables, repeats: int, tf_fun_args: dict):
+    """Compile ``loss`` and its gradient as L-BFGS-B evaluates them; returns the value at
+    the current parameters, the first call's seconds (tracing and compilation included)
+    and the seconds of ``repeats`` calls at nearby points."""
     import gpflow
-    import tensorflow as tf
 
-    agent = build(problem, cartpole_data=cartpole_data)
-    agent._refresh_dynamics()
-    variables = agent.controller.trainable_variables
     opt = gpflow.optimizers.Scipy()
-    fn = opt.eval_func(agent._policy_loss, variables, tf_fun_args=dict(autograph=False),
-                      compile=True)
+    fn = opt.eval_func(loss, variables, tf_fun_args=tf_fun_args, compile=True)
     x0 = opt.initial_parameters(variables).numpy()
     t0 = time.perf_counter()
-    fn(x0)
+    value, _ = fn(x0)
     trace = time.perf_counter() - t0
     seconds = []
     for i in range(repeats):
@@ -90,6 +87,18 @@ def time_objective(problem: str, repeats: int, cartpole_data: int):
         t0 = time.perf_counter()
         fn(x)
         seconds.append(time.perf_counter() - t0)
+    return float(value), trace, seconds
+
+
+def time_objective(problem: str, repeats: int, cartpole_data: int):
+    """Trace time and per-call seconds of the objective + gradient L-BFGS-B evaluates."""
+    import tensorflow as tf
+
+    agent = build(problem, cartpole_data=cartpole_data)
+    agent._refresh_dynamics()
+    _, trace, seconds = _time_loss_and_gradient(
+        agent._policy_loss, agent.controller.trainable_variables, repeats,
+        dict(autograph=False))
 
     @tf.function
     def forward():
@@ -111,29 +120,14 @@ def time_baseline(problem: str, repeats: int, cartpole_data: int):
     its agreement with the library, trace time, seconds per call, and the seconds of 10
     L-BFGS-B iterations with it (compilation included)."""
     import gpflow
-    import tensorflow as tf
 
     from naive_port import make_objective
 
     agent = build(problem, cartpole_data=cartpole_data)
     agent._refresh_dynamics()
     ours = float(agent._policy_loss().numpy())
-    loss = make_objective(agent)
-    variables = agent.controller.trainable_variables
-    opt = gpflow.optimizers.Scipy()
-    fn = opt.eval_func(loss, variables, tf_fun_args={}, compile=True)
-    x0 = opt.initial_parameters(variables).numpy()
-    t0 = time.perf_counter()
-    naive, _ = fn(x0)
-    trace = time.perf_counter() - t0
-    seconds = []
-    for i in range(repeats):
-        x = x0 + 1e-3 * np.random.default_rng(i).standard_normal(x0.shape)
-        t0 = time.perf_counter()
-        fn(x)
-        seconds.append(time.perf_counter() - t0)
-    Scipy = gpflow.optimizers.Scipy
-    Scipy.assign_tensors(variables, Scipy.unpack_tensors(variables, tf.constant(x0)))
+    naive, trace, seconds = _time_loss_and_gradient(
+        make_objective(agent), agent.controller.trainable_variables, repeats, {})
     fresh = build(problem, cartpole_data=cartpole_data)
     fresh._refresh_dynamics()
     t0 = time.perf_counter()

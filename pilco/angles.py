@@ -5,7 +5,7 @@ a continuous, periodic input. With x ~ N(m, s) these moments are exact.
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from typing import Sequence
 
 import numpy as np
 import tensorflow as tf

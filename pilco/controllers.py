@@ -18,7 +18,6 @@ import numpy as np
 import tensorflow as tf
 from gpflow import Parameter
 from gpflow.config import default_float
-from gpflow.utilities import positive
 
 from . import moments
 from .validation import check_gaussian, check_positive_int, check_max_action, as_2d_float

@@ -6,7 +6,7 @@ PILCO maximises the sum of expected rewards over the horizon. A saturating
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from typing import Sequence
 
 import gpflow
 import numpy as np

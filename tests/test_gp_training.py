@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import gpflow
 import numpy as np
-import pytest
 from gpflow.utilities import multiple_assign, read_values
 
 from pilco.models import MGPR, SMGPR

@@ -28,7 +28,6 @@ from typing import Callable, Dict, List, Optional
 import gpflow
 import numpy as np
 import tensorflow as tf
-from gpflow.config import default_float
 
 from .. import moments
 from ..snapshots import restore, snapshot, step_callback
