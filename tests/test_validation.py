@@ -482,3 +482,31 @@ def test_policy_optimisation_keeps_the_best_policy_after_a_failure(caplog, monke
         for v, b in zip(agent.controller.trainable_variables, before):
             np.testing.assert_array_equal(v.numpy(), b)
     assert np.all(np.isfinite(agent.compute_action(np.zeros(D))))
+
+
+def test_interrupted_policy_optimisation_keeps_the_best_policy_evaluated():
+    """An interrupt in the middle of a run (Ctrl-C, SIGTERM in the runner) leaves the best
+    policy evaluated so far in place, not the trial point being evaluated."""
+    agent = make_agent()
+    start = agent.expected_return()
+    returns = []
+    original = agent._policy_optimizer.eval_func
+
+    def interrupting_eval_func(*args, **kwargs):
+        inner = original(*args, **kwargs)
+
+        def wrapped(x):
+            if len(returns) == 4:  # a far-off trial point, then Ctrl-C while it is set
+                inner(x + 3.0)
+                raise KeyboardInterrupt
+            loss, grad = inner(x)
+            returns.append(-float(loss))
+            return loss, grad
+
+        return wrapped
+
+    agent._policy_optimizer.eval_func = interrupting_eval_func
+    with pytest.raises(KeyboardInterrupt):
+        agent.optimize_policy(maxiter=50)
+    assert np.isclose(agent.expected_return(), max(returns), rtol=1e-9)
+    assert agent.expected_return() >= start - 1e-12

@@ -425,6 +425,14 @@ class PILCO(gpflow.base.Module):
             except (tf.errors.InvalidArgumentError, ValueError) as err:
                 logger.warning("policy optimisation run %d failed (%s); keeping the best policy "
                                "so far", r, str(err).splitlines()[0][:120])
+            except BaseException:
+                # interrupted (Ctrl-C, a callback's exception): leave the best policy
+                # evaluated so far in place, not the last trial point of a line search
+                if not opt.restore_best(variables):
+                    restore(self.controller, start_values)
+                logger.warning("policy optimisation interrupted after %d evaluations; the best "
+                               "policy so far is kept", opt.evaluations)
+                raise
         if not opt.restore_best(variables):
             restore(self.controller, start_values)
             logger.warning("policy optimisation evaluated no point where the expected return "
