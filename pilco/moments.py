@@ -348,13 +348,13 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
     T = (eye - Ainv) * pred.isqPo
     tP = tf.exp(-0.5 * logdetA)  # [P]
     kI, kJ = tf.gather(k, I), tf.gather(k, J)
+    mI, mJ = m * pred.iL2I, m * pred.iL2J  # m / l_i^2, m / l_j^2, [P, D]
     if pred.W_constant:
         # centers and weights constant: the fused block with its cheaper gradient
-        raw = _pair_second_moments(T, m * pred.iL2I, m * pred.iL2J, kI, kJ,
-                                   pred.XI, pred.XJ, pred.W)
+        raw = _pair_second_moments(T, mI, mJ, kI, kJ, pred.XI, pred.XJ, pred.W)
     else:
-        iiI = pred.XI - (m * pred.iL2I)[:, :, None]  # (centers - m) / l_i^2, [P, D, n]
-        iiJ = pred.XJ - (m * pred.iL2J)[:, :, None]
+        iiI = pred.XI - mI[:, :, None]  # (centers - m) / l_i^2, [P, D, n]
+        iiJ = pred.XJ - mJ[:, :, None]
         _, _, leftT, rightT = _pair_exponent_factors(T, iiI, iiJ, kI, kJ)
         Q = tf.exp(tf.matmul(leftT, rightT, transpose_a=True))  # [P, n, n]
         if pred.deterministic:

@@ -412,6 +412,13 @@ class PILCO(gpflow.base.Module):
         opt.reset()
         start_values = snapshot(self.controller)
 
+        def keep_best() -> bool:
+            """Put the best policy evaluated in place (the start if none); False if none."""
+            if opt.restore_best(variables):
+                return True
+            restore(self.controller, start_values)
+            return False
+
         t0 = time.perf_counter()
         for r in range(restarts):
             if r > 0:
@@ -428,13 +435,11 @@ class PILCO(gpflow.base.Module):
             except BaseException:
                 # interrupted (Ctrl-C, a callback's exception): leave the best policy
                 # evaluated so far in place, not the last trial point of a line search
-                if not opt.restore_best(variables):
-                    restore(self.controller, start_values)
+                keep_best()
                 logger.warning("policy optimisation interrupted after %d evaluations; the best "
                                "policy so far is kept", opt.evaluations)
                 raise
-        if not opt.restore_best(variables):
-            restore(self.controller, start_values)
+        if not keep_best():
             logger.warning("policy optimisation evaluated no point where the expected return "
                            "is finite; the starting policy is kept")
             try:
