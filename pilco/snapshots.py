@@ -1,5 +1,6 @@
 """Helpers of the optimisers: copies of a module's parameter values, to keep the best ones
-found, and the adapter of a progress callback to GPflow's step callback.
+found, the adapter of a progress callback to GPflow's step callback, and the early stop of
+a run whose loss has stalled.
 
 Values are copied in the optimiser's (unconstrained) space: a constrained value that sits
 on its bound (a noise variance at its floor) would not survive the round trip through
@@ -7,13 +8,17 @@ the constraining transform, whereas the unconstrained value restores it exactly.
 """
 from __future__ import annotations
 
-from typing import Callable, Dict, Optional
+import logging
+from typing import Callable, Dict, List, Optional
 
+import gpflow
 import numpy as np
 import tensorflow as tf
 from gpflow.utilities import parameter_dict
 
-__all__ = ["snapshot", "restore", "step_callback"]
+__all__ = ["snapshot", "restore", "Stalled", "TrackingScipy", "check_min_improvement"]
+
+logger = logging.getLogger(__name__)
 
 
 def _variables(module) -> Dict[str, tf.Variable]:
@@ -36,12 +41,69 @@ def restore(module, values: Dict[str, np.ndarray]) -> None:
         variables[path].assign(value)
 
 
-def step_callback(callback: Optional[Callable[[int], None]]):
-    """A ``gpflow.optimizers.Scipy`` step callback calling ``callback(iteration)``, or None."""
-    if callback is None:
+class Stalled(Exception):
+    """Raised by a step callback to end a run whose loss stopped improving.
+
+    ``iterations``: the iterations the run made.
+    """
+
+    def __init__(self, iterations: int):
+        super().__init__(f"stalled after {iterations} iterations")
+        self.iterations = iterations
+
+
+class TrackingScipy(gpflow.optimizers.Scipy):
+    """GPflow's Scipy optimiser that remembers the lowest finite loss of the current run
+    (``run_best_loss``; :meth:`start_run` begins a new run)."""
+
+    def __init__(self):
+        super().__init__()
+        self.run_best_loss = np.inf
+
+    def start_run(self) -> None:
+        self.run_best_loss = np.inf
+
+    def eval_func(self, closure, variables, tf_fun_args, compile=True,
+                  allow_unused_variables=False):
+        inner = super().eval_func(closure, variables, tf_fun_args, compile=compile,
+                                  allow_unused_variables=allow_unused_variables)
+
+        def tracked(x):
+            loss, grad = inner(x)
+            if np.isfinite(loss) and loss < self.run_best_loss and np.all(np.isfinite(grad)):
+                self.run_best_loss = float(loss)
+            return loss, grad
+
+        return tracked
+
+    def step_callback(self, callback: Optional[Callable[[int], None]] = None,
+                      min_improvement: Optional[float] = None, patience: int = 10,
+                      what: str = "loss"):
+        """A GPflow step callback for one run: ``callback(iteration)``, then, with
+        ``min_improvement``, :class:`Stalled` once the run's best loss fell by less than
+        ``min_improvement`` over the last ``patience`` iterations."""
+        history: List[float] = []
+
+        def on_step(step, variables, values):  # noqa: ARG001 - gpflow's callback signature
+            if callback is not None:
+                callback(int(step))
+            logger.debug("iteration %d: best %s %.6g", step, what, self.run_best_loss)
+            if min_improvement is None:
+                return
+            history.append(self.run_best_loss)
+            if len(history) > patience and history[-patience - 1] - history[-1] < min_improvement:
+                raise Stalled(len(history))
+
+        return on_step
+
+
+def check_min_improvement(value, name: str = "min_improvement") -> Optional[float]:
+    """``None`` or a finite number >= 0, else ValueError/TypeError naming ``name``."""
+    if value is None:
         return None
-
-    def on_step(step, variables, values):  # noqa: ARG001 - gpflow's callback signature
-        callback(int(step))
-
-    return on_step
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a finite number >= 0 or None, got "
+                        f"{type(value).__name__}")
+    if not np.isfinite(value) or value < 0:
+        raise ValueError(f"{name} must be a finite number >= 0 or None, got {value!r}")
+    return float(value)

@@ -330,6 +330,16 @@ METHODS = [
      TypeError, "restarts must be a positive integer"),
     ("optimize_policy-seed-negative", "agent", lambda a: a.optimize_policy(seed=-1),
      ValueError, "seed must be None or a non-negative integer"),
+    ("optimize_policy-method-unknown", "agent", lambda a: a.optimize_policy(method="adam"),
+     ValueError, r"method must be one of \('L-BFGS-B', 'BFGS'\), got 'adam'"),
+    ("optimize_policy-min-improvement-negative", "agent",
+     lambda a: a.optimize_policy(min_improvement=-1.0), ValueError,
+     "min_improvement must be a finite number >= 0 or None"),
+    ("optimize_policy-min-improvement-nan", "agent",
+     lambda a: a.optimize_policy(min_improvement=np.nan), ValueError,
+     "min_improvement must be a finite number >= 0 or None"),
+    ("optimize_policy-patience-zero", "agent", lambda a: a.optimize_policy(patience=0),
+     ValueError, "patience must be a positive integer, got 0"),
     ("optimize_models-maxiter-zero", "agent", lambda a: a.optimize_models(maxiter=0),
      ValueError, "maxiter must be a positive integer, got 0"),
     ("optimize_models-restarts-negative", "agent", lambda a: a.optimize_models(restarts=-2),
@@ -510,3 +520,57 @@ def test_interrupted_policy_optimisation_keeps_the_best_policy_evaluated():
         agent.optimize_policy(maxiter=50)
     assert np.isclose(agent.expected_return(), max(returns), rtol=1e-9)
     assert agent.expected_return() >= start - 1e-12
+
+
+def test_policy_optimisation_stops_when_the_return_stalls(caplog):
+    """With ``min_improvement`` a run ends once ``patience`` iterations gained less than it:
+    an unreachable bar stops after exactly patience + 1 iterations, keeping the best policy."""
+    agent = make_agent()
+    start = agent.expected_return()
+    iterations = []
+    with caplog.at_level(logging.INFO, logger="pilco"):
+        best = agent.optimize_policy(maxiter=50, callback=iterations.append,
+                                     min_improvement=1e9, patience=3)
+    assert iterations == [0, 1, 2, 3]
+    assert any("stopped early, after [4] iterations" in r.getMessage() for r in caplog.records)
+    assert best >= start - 1e-12
+    assert np.isclose(agent.expected_return(), best, rtol=1e-9)
+
+
+def test_policy_optimisation_runs_on_without_a_stall():
+    """A bar of zero never stops a run that keeps improving: it reaches maxiter."""
+    agent = make_agent()
+    iterations = []
+    agent.optimize_policy(maxiter=4, callback=iterations.append, min_improvement=0.0,
+                          patience=2)
+    assert iterations == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("method", ["BFGS", "bfgs", "L-BFGS-B"])
+def test_policy_optimisers_improve_the_expected_return(method):
+    agent = make_agent()
+    start = agent.expected_return()
+    best = agent.optimize_policy(maxiter=15, method=method)
+    assert best > start + 1e-3
+    assert np.isclose(agent.expected_return(), best, rtol=1e-9)
+
+
+def test_gp_training_stops_when_the_loss_stalls():
+    gp_model = MGPR((X, Y))
+    start = gp_model._model_losses().sum()
+    iterations = []
+    gp_model.optimize(maxiter=100, callback=iterations.append, min_improvement=1e9, patience=2)
+    assert iterations == [0, 1, 2]
+    assert gp_model._model_losses().sum() < start
+    with pytest.raises(ValueError, match="min_improvement must be a finite number >= 0"):
+        gp_model.optimize(min_improvement=-0.5)
+    with pytest.raises(TypeError, match="min_improvement must be a finite number >= 0"):
+        gp_model.optimize(min_improvement="1")
+
+
+def test_experiment_config_rejects_an_unknown_early_stop_rule():
+    from pilco.runner import ExperimentConfig
+
+    assert ExperimentConfig("t", "id", policy_early_stop="solved").policy_early_stop == "solved"
+    with pytest.raises(ValueError, match="policy_early_stop must be 'always' or 'solved'"):
+        ExperimentConfig("t", "id", policy_early_stop="never")

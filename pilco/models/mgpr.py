@@ -30,7 +30,7 @@ import numpy as np
 import tensorflow as tf
 
 from .. import moments
-from ..snapshots import restore, snapshot, step_callback
+from ..snapshots import Stalled, TrackingScipy, check_min_improvement, restore, snapshot
 from ..validation import (
     check_data,
     check_gaussian,
@@ -70,7 +70,7 @@ class MGPR(gpflow.base.Module):
             for i in range(self.num_outputs)
         ]
         self.models: List[gpflow.models.GPModel] = self._build_models(X, Y)
-        self._optimizer = gpflow.optimizers.Scipy()
+        self._optimizer = TrackingScipy()
         self.initialize_hyperparameters()
 
     # -- construction -------------------------------------------------------------------
@@ -192,18 +192,23 @@ class MGPR(gpflow.base.Module):
         return np.array([float(m.log_marginal_likelihood().numpy()) for m in self.models])
 
     def optimize(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
-                 callback: Optional[Callable[[int], None]] = None):
+                 callback: Optional[Callable[[int], None]] = None,
+                 min_improvement: Optional[float] = None, patience: int = 10):
         """Maximise the evidence of every output's GP with L-BFGS-B (gpflow Scipy).
 
         The first run starts from the current hyperparameters; each further restart starts
         from data-driven values perturbed at random. The outputs are independent, so the
         best values of each output across runs are kept (copies of the values, not
         references to the live variables). ``callback(iteration)`` is called after every
-        L-BFGS iteration (progress bars; an exception it raises stops training). Returns
-        the final per-output losses [E].
+        L-BFGS iteration (progress bars; an exception it raises stops training). With
+        ``min_improvement``, a run stops once the summed loss (negative log evidence plus
+        the soft bounds) fell by less than that over the last ``patience`` iterations.
+        Returns the final per-output losses [E].
         """
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
+        patience = check_positive_int(patience, "patience")
+        min_improvement = check_min_improvement(min_improvement)
         rng = np.random.default_rng(check_seed(seed))
         opt = self._optimizer  # one instance: its compiled objective is reused across calls
         groups = self._selection_groups()
@@ -237,10 +242,15 @@ class MGPR(gpflow.base.Module):
         for r in range(restarts):
             if r > 0:
                 self.initialize_hyperparameters(rng, spread=0.5)
+            opt.start_run()
             try:
                 opt.minimize(self._training_loss, self.trainable_variables,
                              options=dict(maxiter=maxiter), method="L-BFGS-B",
-                             step_callback=step_callback(callback))
+                             step_callback=opt.step_callback(callback, min_improvement,
+                                                             patience, what="GP loss"))
+            except Stalled as stop:
+                logger.debug("GP training run %d stopped early after %d iterations", r,
+                             stop.iterations)
             except (tf.errors.InvalidArgumentError, ValueError) as err:
                 logger.warning(
                     "GP training run %d failed (%s); keeping the best hyperparameters so far "

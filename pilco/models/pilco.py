@@ -28,7 +28,7 @@ from gpflow.config import default_float
 
 from .. import moments
 from ..angles import augment_state
-from ..snapshots import restore, snapshot, step_callback
+from ..snapshots import Stalled, TrackingScipy, check_min_improvement, restore, snapshot
 from ..validation import (
     _to_numpy,
     as_2d_float,
@@ -43,13 +43,16 @@ from ..validation import (
 from .mgpr import MGPR
 from .smgpr import SMGPR
 
-__all__ = ["PILCO"]
+__all__ = ["PILCO", "POLICY_METHODS"]
 
 logger = logging.getLogger(__name__)
 
+#: optimisers ``PILCO.optimize_policy`` accepts (scipy method names)
+POLICY_METHODS = ("L-BFGS-B", "BFGS")
 
-class _GuardedScipy(gpflow.optimizers.Scipy):
-    """GPflow's L-BFGS-B that survives numerical failures and remembers its best point.
+
+class _GuardedScipy(TrackingScipy):
+    """GPflow's Scipy optimiser that survives numerical failures and remembers its best point.
 
     A trial point far out (a collapsed lengthscale, say) can make the rollout's linear
     algebra fail or its value NaN. Reporting a very large loss there, instead of raising
@@ -72,6 +75,7 @@ class _GuardedScipy(gpflow.optimizers.Scipy):
         self.first_loss = None
         self.best_loss = np.inf
         self.best_x = None
+        self.start_run()
 
     def eval_func(self, closure, variables, tf_fun_args, compile=True,
                   allow_unused_variables=False):
@@ -366,14 +370,17 @@ class PILCO(gpflow.base.Module):
 
     # -- learning ---------------------------------------------------------------------------
     def optimize_models(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
-                        callback: Optional[Callable[[int], None]] = None):
+                        callback: Optional[Callable[[int], None]] = None,
+                        min_improvement: Optional[float] = None, patience: int = 10):
         """Train the dynamics GPs by evidence maximisation; returns per-output losses [E].
 
-        ``callback(iteration)`` is called after every L-BFGS iteration.
+        ``callback(iteration)`` is called after every L-BFGS iteration; ``min_improvement``
+        and ``patience`` stop a stalled run early (see :meth:`MGPR.optimize`).
         """
         t0 = time.perf_counter()
         losses = self.mgpr.optimize(maxiter=maxiter, restarts=restarts, seed=seed,
-                                    callback=callback)
+                                    callback=callback, min_improvement=min_improvement,
+                                    patience=patience)
         logger.info("dynamics model trained in %.2f s", time.perf_counter() - t0)
         return losses
 
@@ -390,8 +397,10 @@ class PILCO(gpflow.base.Module):
         return float(-self._policy_loss().numpy())
 
     def optimize_policy(self, maxiter: int = 50, restarts: int = 1, seed: Optional[int] = None,
-                        callback: Optional[Callable[[int], None]] = None):
-        """Maximise the predicted total reward over the policy parameters (L-BFGS-B).
+                        callback: Optional[Callable[[int], None]] = None,
+                        method: str = "L-BFGS-B", min_improvement: Optional[float] = None,
+                        patience: int = 10):
+        """Maximise the predicted total reward over the policy parameters (L-BFGS-B or BFGS).
 
         The first run starts from the current policy, each further restart from a random
         one. The best policy evaluated by any run is kept (never one worse than the
@@ -402,9 +411,20 @@ class PILCO(gpflow.base.Module):
         in-graph), traced on the first call and reused by later calls and restarts.
         ``callback(iteration)`` is called after every L-BFGS iteration (progress bars;
         an exception it raises, e.g. ``KeyboardInterrupt``, stops the optimisation).
+
+        ``method`` is ``"L-BFGS-B"`` or ``"BFGS"`` (a dense inverse-Hessian update, what
+        the MATLAB release's ``minimize`` uses for up to 1000 parameters). With
+        ``min_improvement`` set, a run stops once its best expected return has grown by
+        less than that over the last ``patience`` iterations (a converged run then costs a
+        few iterations instead of ``maxiter``).
         """
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
+        patience = check_positive_int(patience, "patience")
+        if not isinstance(method, str) or method.upper() not in POLICY_METHODS:
+            raise ValueError(f"method must be one of {POLICY_METHODS}, got {method!r}")
+        method = method.upper()
+        min_improvement = check_min_improvement(min_improvement)
         rng = np.random.default_rng(check_seed(seed))
         self._refresh_dynamics()
         variables = self.controller.trainable_variables
@@ -420,15 +440,20 @@ class PILCO(gpflow.base.Module):
             return False
 
         t0 = time.perf_counter()
+        stalled = []
         for r in range(restarts):
             if r > 0:
                 self.controller.randomize(seed=int(rng.integers(2**31)))
+            opt.start_run()
             try:
                 opt.minimize(
-                    self._policy_loss, variables, method="L-BFGS-B",
+                    self._policy_loss, variables, method=method,
                     options=dict(maxiter=maxiter), tf_fun_args=dict(autograph=False),
-                    step_callback=step_callback(callback),
+                    step_callback=opt.step_callback(callback, min_improvement, patience,
+                                                    what="negative expected return"),
                 )
+            except Stalled as stop:
+                stalled.append(stop.iterations)
             except (tf.errors.InvalidArgumentError, ValueError) as err:
                 logger.warning("policy optimisation run %d failed (%s); keeping the best policy "
                                "so far", r, str(err).splitlines()[0][:120])
@@ -450,8 +475,10 @@ class PILCO(gpflow.base.Module):
             logger.warning("policy optimisation met %d trial points where the rollout failed "
                            "numerically; the line search stepped back from them", opt.failures)
         start = -np.inf if opt.first_loss is None else -opt.first_loss
-        logger.info("policy optimised in %.2f s (%d evaluations): expected return %.4f -> %.4f",
-                    time.perf_counter() - t0, opt.evaluations, start, -opt.best_loss)
+        logger.info("policy optimised in %.2f s (%d evaluations%s): expected return %.4f -> %.4f",
+                    time.perf_counter() - t0, opt.evaluations,
+                    f"; {len(stalled)} run(s) stopped early, after {stalled} iterations"
+                    if stalled else "", start, -opt.best_loss)
         return -opt.best_loss
 
     # -- acting -----------------------------------------------------------------------------
