@@ -121,8 +121,11 @@ def make_config(args, task: str, damaged: bool):
         env_kwargs={**env_kwargs(args, damaged), "max_episode_steps": args.horizon},
         random_action_scale=args.random_action, max_data=args.max_data,
         model_iters=args.model_iters, model_restarts=args.model_restarts,
+        model_min_improvement=args.model_min_improvement,
         retrain_unchanged_model=args.retrain_unchanged_model,
         policy_iters=args.policy_iters, policy_restarts=args.policy_restarts,
+        policy_method=args.policy_optimizer, policy_min_improvement=args.policy_min_improvement,
+        policy_patience=args.policy_patience, policy_early_stop=args.policy_early_stop,
         cost_width=args.cost_width, success_threshold=args.threshold, solved_rule="reach",
         render=not args.no_render, predictions=not args.no_figures, quiet=args.quiet,
     )

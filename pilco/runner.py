@@ -320,7 +320,17 @@ class ExperimentConfig:
         max_data: the dynamics model learns from the first ``max_data`` transitions
             only (``None`` or 0: all of them).
         model_iters, model_restarts: L-BFGS iterations / restarts of GP training.
+        model_min_improvement, model_patience: stop GP training once its loss fell by less
+            than ``model_min_improvement`` over the last ``model_patience`` iterations
+            (``None``: always ``model_iters``).
         policy_iters, policy_restarts: the same for the policy.
+        policy_method: ``"L-BFGS-B"`` or ``"BFGS"`` (see ``PILCO.optimize_policy``).
+        policy_min_improvement, policy_patience: stop a policy optimisation run when its
+            predicted return grew by less than ``policy_min_improvement`` over the last
+            ``policy_patience`` iterations (``None``: always ``policy_iters``).
+        policy_early_stop: ``"always"``, or ``"solved"``: the early stop applies only once
+            an episode has been solved (refining a policy that works needs few
+            iterations; before that, a slow stretch often precedes a large gain).
         cost_width: width of the saturating cost of the distance (summary ``cost``).
         success_threshold: distance [m] counted as "at the target".
         solved_rule: ``"reach"``: an episode is solved when any state is within the
@@ -345,8 +355,14 @@ class ExperimentConfig:
     max_data: Optional[int] = None
     model_iters: int = 1000
     model_restarts: int = 1
+    model_min_improvement: Optional[float] = None
+    model_patience: int = 10
     policy_iters: int = 50
     policy_restarts: int = 1
+    policy_method: str = "L-BFGS-B"
+    policy_min_improvement: Optional[float] = None
+    policy_patience: int = 10
+    policy_early_stop: str = "always"
     cost_width: float = 0.25
     success_threshold: float = 0.05
     solved_rule: str = "reach"
@@ -357,6 +373,9 @@ class ExperimentConfig:
     quiet: bool = False
 
     def __post_init__(self):
+        if self.policy_early_stop not in ("always", "solved"):
+            raise ValueError(f"policy_early_stop must be 'always' or 'solved', got "
+                             f"{self.policy_early_stop!r}")
         if self.solved_rule not in ("reach", "hold"):
             raise ValueError(f"solved_rule must be 'reach' or 'hold', got {self.solved_rule!r}")
         if self.random_episodes < 1:
@@ -754,7 +773,9 @@ class Experiment:
                       cfg.quiet) as bar:
                 self.agent.optimize_models(maxiter=cfg.model_iters,
                                            restarts=cfg.model_restarts, seed=seed,
-                                           callback=_optimizer_callback(bar))
+                                           callback=_optimizer_callback(bar),
+                                           min_improvement=cfg.model_min_improvement,
+                                           patience=cfg.model_patience)
                 if self.after_model_fit is not None:
                     self.after_model_fit(self.agent)
             self._model_fingerprint = fingerprint
@@ -765,9 +786,13 @@ class Experiment:
         t0, c0 = time.perf_counter(), time.process_time()
         with _bar(cfg.policy_iters * cfg.policy_restarts, f"episode {number} policy",
                   cfg.quiet) as bar:
-            expected = self.agent.optimize_policy(maxiter=cfg.policy_iters,
-                                                  restarts=cfg.policy_restarts, seed=seed,
-                                                  callback=_optimizer_callback(bar))
+            expected = self.agent.optimize_policy(
+                maxiter=cfg.policy_iters, restarts=cfg.policy_restarts, seed=seed,
+                callback=_optimizer_callback(bar), method=cfg.policy_method,
+                min_improvement=(cfg.policy_min_improvement
+                                 if cfg.policy_early_stop == "always"
+                                 or self.solved_at_episode() is not None else None),
+                patience=cfg.policy_patience)
         seconds["policy"] = time.perf_counter() - t0
         cpu["policy"] = time.process_time() - c0
         self.cpu_seconds[number] = cpu
@@ -896,6 +921,10 @@ def format_episode_table(summary: Dict[str, Any]) -> str:
 def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, steps: int,
                          basis_functions: int, policy_iters: int, model_iters: int,
                          policy_restarts: int = 1, model_restarts: int = 1,
+                         policy_method: str = "L-BFGS-B",
+                         policy_min_improvement: Optional[float] = None,
+                         model_min_improvement: Optional[float] = None,
+                         policy_early_stop: str = "always",
                          max_data: Optional[int] = None, random_episodes: int = 1,
                          output: str = "runs/run-seed{seed}") -> None:
     """Flags shared by the example scripts (defaults given per task)."""
@@ -919,13 +948,30 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
     g.add_argument("--basis-functions", type=int, default=basis_functions,
                    help="RBF policy basis functions (default %(default)s)")
     g.add_argument("--policy-iters", type=int, default=policy_iters,
-                   help="L-BFGS iterations per policy optimisation (default %(default)s)")
+                   help="optimiser iterations per policy optimisation (default %(default)s)")
     g.add_argument("--policy-restarts", type=int, default=policy_restarts,
                    help="policy optimisation restarts (default %(default)s)")
+    g.add_argument("--policy-optimizer", choices=("L-BFGS-B", "BFGS"), type=str.upper,
+                   default=policy_method,
+                   help="policy optimiser (BFGS: dense update, as the MATLAB release; "
+                        "default %(default)s)")
+    g.add_argument("--policy-min-improvement", type=float, default=policy_min_improvement,
+                   help="stop a policy optimisation once its predicted return grew by less "
+                        "than this over the last --policy-patience iterations (default "
+                        "%(default)s: never)")
+    g.add_argument("--policy-patience", type=int, default=10,
+                   help="iterations for --policy-min-improvement (default %(default)s)")
+    g.add_argument("--policy-early-stop", choices=("always", "solved"),
+                   default=policy_early_stop,
+                   help="apply --policy-min-improvement always, or only once an episode "
+                        "was solved (default %(default)s)")
     g.add_argument("--model-iters", type=int, default=model_iters,
                    help="L-BFGS iterations of GP training (default %(default)s)")
     g.add_argument("--model-restarts", type=int, default=model_restarts,
                    help="GP training restarts (default %(default)s)")
+    g.add_argument("--model-min-improvement", type=float, default=model_min_improvement,
+                   help="stop GP training once its loss fell by less than this over the "
+                        "last 10 iterations (default %(default)s: never)")
     g.add_argument("--max-data", type=int, default=max_data,
                    help="GP learns from the first N transitions only (0 or None: all; "
                         "default %(default)s)")
