@@ -10,10 +10,11 @@ upright target (width 0.25 m); the release optimises the policy with BFGS for up
 line searches and trains the GPs with up to 300 (here: scipy's BFGS for the policy, 150
 iterations, and L-BFGS-B for the GPs, 300 iterations).
 
-Two time savers, both switchable: GP training stops once its loss fell by less than 0.5
-over 10 iterations (``--model-min-improvement``), and once an episode has been solved the
-policy optimisation stops when its predicted return grew by less than 0.05 over 10
-iterations (``--policy-min-improvement``, ``--policy-early-stop always|solved``).
+Two time savers, both switchable (0 turns them off): GP training stops once its loss fell
+by less than 0.05 % over 10 iterations (``--model-min-rel-improvement``), and policy
+optimisation once its predicted return grew by less than 0.3 % over 10 iterations
+(``--policy-min-rel-improvement``; ``--policy-early-stop solved`` applies it only after an
+episode was solved).
 
 The run is "solved" when, in a learned episode, the tip stays within 0.1 m of the
 target for the last 10 steps.
@@ -47,8 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     add_common_arguments(parser, episodes=8, steps=40, basis_functions=10, policy_iters=150,
                          model_iters=300, max_data=None, output="runs/cartpole-seed{seed}",
-                         policy_method="BFGS", policy_min_improvement=0.05,
-                         policy_early_stop="solved", model_min_improvement=0.5)
+                         policy_method="BFGS", policy_min_rel_improvement=0.003,
+                         model_min_rel_improvement=5e-4)
     g = parser.add_argument_group("cart-pole")
     g.add_argument("--max-force", type=float, default=10.0, help="force bound [N]")
     g.add_argument("--cost-width", type=float, default=0.25,
@@ -114,10 +115,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         max_episode_steps=args.horizon),
         random_action_scale=None, max_data=args.max_data,
         model_iters=args.model_iters, model_restarts=args.model_restarts,
-        model_min_improvement=args.model_min_improvement,
+        model_min_rel_improvement=args.model_min_rel_improvement,
         retrain_unchanged_model=args.retrain_unchanged_model,
         policy_iters=args.policy_iters, policy_restarts=args.policy_restarts,
-        policy_method=args.policy_optimizer, policy_min_improvement=args.policy_min_improvement,
+        policy_method=args.policy_optimizer, policy_min_rel_improvement=args.policy_min_rel_improvement,
         policy_patience=args.policy_patience, policy_early_stop=args.policy_early_stop,
         cost_width=args.cost_width, success_threshold=args.threshold, solved_rule="hold",
         hold_steps=args.hold_steps, render=not args.no_render,

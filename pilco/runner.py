@@ -320,14 +320,14 @@ class ExperimentConfig:
         max_data: the dynamics model learns from the first ``max_data`` transitions
             only (``None`` or 0: all of them).
         model_iters, model_restarts: L-BFGS iterations / restarts of GP training.
-        model_min_improvement, model_patience: stop GP training once its loss fell by less
-            than ``model_min_improvement`` over the last ``model_patience`` iterations
+        model_min_rel_improvement, model_patience: stop GP training once its loss fell by less
+            than ``model_min_rel_improvement`` (relative) over the last ``model_patience`` iterations
             (``None``: always ``model_iters``).
         policy_iters, policy_restarts: the same for the policy.
         policy_method: ``"L-BFGS-B"`` or ``"BFGS"`` (see ``PILCO.optimize_policy``).
-        policy_min_improvement, policy_patience: stop a policy optimisation run when its
-            predicted return grew by less than ``policy_min_improvement`` over the last
-            ``policy_patience`` iterations (``None``: always ``policy_iters``).
+        policy_min_rel_improvement, policy_patience: stop a policy optimisation run when its
+            predicted return grew by less than ``policy_min_rel_improvement`` (relative)
+            over the last ``policy_patience`` iterations (``None``: always ``policy_iters``).
         policy_early_stop: ``"always"``, or ``"solved"``: the early stop applies only once
             an episode has been solved (refining a policy that works needs few
             iterations; before that, a slow stretch often precedes a large gain).
@@ -355,12 +355,12 @@ class ExperimentConfig:
     max_data: Optional[int] = None
     model_iters: int = 1000
     model_restarts: int = 1
-    model_min_improvement: Optional[float] = None
+    model_min_rel_improvement: Optional[float] = None
     model_patience: int = 10
     policy_iters: int = 50
     policy_restarts: int = 1
     policy_method: str = "L-BFGS-B"
-    policy_min_improvement: Optional[float] = None
+    policy_min_rel_improvement: Optional[float] = None
     policy_patience: int = 10
     policy_early_stop: str = "always"
     cost_width: float = 0.25
@@ -774,7 +774,7 @@ class Experiment:
                 self.agent.optimize_models(maxiter=cfg.model_iters,
                                            restarts=cfg.model_restarts, seed=seed,
                                            callback=_optimizer_callback(bar),
-                                           min_improvement=cfg.model_min_improvement,
+                                           min_rel_improvement=cfg.model_min_rel_improvement,
                                            patience=cfg.model_patience)
                 if self.after_model_fit is not None:
                     self.after_model_fit(self.agent)
@@ -789,7 +789,7 @@ class Experiment:
             expected = self.agent.optimize_policy(
                 maxiter=cfg.policy_iters, restarts=cfg.policy_restarts, seed=seed,
                 callback=_optimizer_callback(bar), method=cfg.policy_method,
-                min_improvement=(cfg.policy_min_improvement
+                min_rel_improvement=(cfg.policy_min_rel_improvement
                                  if cfg.policy_early_stop == "always"
                                  or self.solved_at_episode() is not None else None),
                 patience=cfg.policy_patience)
@@ -922,8 +922,8 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
                          basis_functions: int, policy_iters: int, model_iters: int,
                          policy_restarts: int = 1, model_restarts: int = 1,
                          policy_method: str = "L-BFGS-B",
-                         policy_min_improvement: Optional[float] = None,
-                         model_min_improvement: Optional[float] = None,
+                         policy_min_rel_improvement: Optional[float] = None,
+                         model_min_rel_improvement: Optional[float] = None,
                          policy_early_stop: str = "always",
                          max_data: Optional[int] = None, random_episodes: int = 1,
                          output: str = "runs/run-seed{seed}") -> None:
@@ -955,23 +955,23 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
                    default=policy_method,
                    help="policy optimiser (BFGS: dense update, as the MATLAB release; "
                         "default %(default)s)")
-    g.add_argument("--policy-min-improvement", type=float, default=policy_min_improvement,
+    g.add_argument("--policy-min-rel-improvement", type=float, default=policy_min_rel_improvement,
                    help="stop a policy optimisation once its predicted return grew by less "
-                        "than this over the last --policy-patience iterations (default "
-                        "%(default)s: never)")
+                        "than this fraction of it over the last --policy-patience iterations "
+                        "(default %(default)s; 0 or None: never)")
     g.add_argument("--policy-patience", type=int, default=10,
-                   help="iterations for --policy-min-improvement (default %(default)s)")
+                   help="iterations for --policy-min-rel-improvement (default %(default)s)")
     g.add_argument("--policy-early-stop", choices=("always", "solved"),
                    default=policy_early_stop,
-                   help="apply --policy-min-improvement always, or only once an episode "
+                   help="apply --policy-min-rel-improvement always, or only once an episode "
                         "was solved (default %(default)s)")
     g.add_argument("--model-iters", type=int, default=model_iters,
                    help="L-BFGS iterations of GP training (default %(default)s)")
     g.add_argument("--model-restarts", type=int, default=model_restarts,
                    help="GP training restarts (default %(default)s)")
-    g.add_argument("--model-min-improvement", type=float, default=model_min_improvement,
-                   help="stop GP training once its loss fell by less than this over the "
-                        "last 10 iterations (default %(default)s: never)")
+    g.add_argument("--model-min-rel-improvement", type=float, default=model_min_rel_improvement,
+                   help="stop GP training once its loss fell by less than this fraction of "
+                        "it over the last 10 iterations (default %(default)s; 0 or None: never)")
     g.add_argument("--max-data", type=int, default=max_data,
                    help="GP learns from the first N transitions only (0 or None: all; "
                         "default %(default)s)")

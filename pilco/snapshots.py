@@ -16,7 +16,7 @@ import numpy as np
 import tensorflow as tf
 from gpflow.utilities import parameter_dict
 
-__all__ = ["snapshot", "restore", "Stalled", "TrackingScipy", "check_min_improvement"]
+__all__ = ["snapshot", "restore", "Stalled", "TrackingScipy", "check_min_rel_improvement"]
 
 logger = logging.getLogger(__name__)
 
@@ -77,27 +77,29 @@ class TrackingScipy(gpflow.optimizers.Scipy):
         return tracked
 
     def step_callback(self, callback: Optional[Callable[[int], None]] = None,
-                      min_improvement: Optional[float] = None, patience: int = 10,
+                      min_rel_improvement: Optional[float] = None, patience: int = 10,
                       what: str = "loss"):
         """A GPflow step callback for one run: ``callback(iteration)``, then, with
-        ``min_improvement``, :class:`Stalled` once the run's best loss fell by less than
-        ``min_improvement`` over the last ``patience`` iterations."""
+        ``min_rel_improvement``, :class:`Stalled` once the run's best loss fell by less than
+        ``min_rel_improvement * max(1, |best loss|)`` over the last ``patience`` iterations
+        (relative, like scipy's ``ftol``, so one value serves losses of any scale)."""
         history: List[float] = []
 
         def on_step(step, variables, values):  # noqa: ARG001 - gpflow's callback signature
             if callback is not None:
                 callback(int(step))
             logger.debug("iteration %d: best %s %.6g", step, what, self.run_best_loss)
-            if min_improvement is None:
+            if min_rel_improvement is None:
                 return
             history.append(self.run_best_loss)
-            if len(history) > patience and history[-patience - 1] - history[-1] < min_improvement:
+            if len(history) > patience and (history[-patience - 1] - history[-1]
+                                             < min_rel_improvement * max(1.0, abs(history[-1]))):
                 raise Stalled(len(history))
 
         return on_step
 
 
-def check_min_improvement(value, name: str = "min_improvement") -> Optional[float]:
+def check_min_rel_improvement(value, name: str = "min_rel_improvement") -> Optional[float]:
     """``None`` or a finite number >= 0, else ValueError/TypeError naming ``name``."""
     if value is None:
         return None

@@ -332,12 +332,12 @@ METHODS = [
      ValueError, "seed must be None or a non-negative integer"),
     ("optimize_policy-method-unknown", "agent", lambda a: a.optimize_policy(method="adam"),
      ValueError, r"method must be one of \('L-BFGS-B', 'BFGS'\), got 'adam'"),
-    ("optimize_policy-min-improvement-negative", "agent",
-     lambda a: a.optimize_policy(min_improvement=-1.0), ValueError,
-     "min_improvement must be a finite number >= 0 or None"),
-    ("optimize_policy-min-improvement-nan", "agent",
-     lambda a: a.optimize_policy(min_improvement=np.nan), ValueError,
-     "min_improvement must be a finite number >= 0 or None"),
+    ("optimize_policy-min-rel-improvement-negative", "agent",
+     lambda a: a.optimize_policy(min_rel_improvement=-1.0), ValueError,
+     "min_rel_improvement must be a finite number >= 0 or None"),
+    ("optimize_policy-min-rel-improvement-nan", "agent",
+     lambda a: a.optimize_policy(min_rel_improvement=np.nan), ValueError,
+     "min_rel_improvement must be a finite number >= 0 or None"),
     ("optimize_policy-patience-zero", "agent", lambda a: a.optimize_policy(patience=0),
      ValueError, "patience must be a positive integer, got 0"),
     ("optimize_models-maxiter-zero", "agent", lambda a: a.optimize_models(maxiter=0),
@@ -523,14 +523,14 @@ def test_interrupted_policy_optimisation_keeps_the_best_policy_evaluated():
 
 
 def test_policy_optimisation_stops_when_the_return_stalls(caplog):
-    """With ``min_improvement`` a run ends once ``patience`` iterations gained less than it:
+    """With ``min_rel_improvement`` a run ends once ``patience`` iterations gained less than it:
     an unreachable bar stops after exactly patience + 1 iterations, keeping the best policy."""
     agent = make_agent()
     start = agent.expected_return()
     iterations = []
     with caplog.at_level(logging.INFO, logger="pilco"):
         best = agent.optimize_policy(maxiter=50, callback=iterations.append,
-                                     min_improvement=1e9, patience=3)
+                                     min_rel_improvement=1e9, patience=3)
     assert iterations == [0, 1, 2, 3]
     assert any("stopped early, after [4] iterations" in r.getMessage() for r in caplog.records)
     assert best >= start - 1e-12
@@ -541,7 +541,7 @@ def test_policy_optimisation_runs_on_without_a_stall():
     """A bar of zero never stops a run that keeps improving: it reaches maxiter."""
     agent = make_agent()
     iterations = []
-    agent.optimize_policy(maxiter=4, callback=iterations.append, min_improvement=0.0,
+    agent.optimize_policy(maxiter=4, callback=iterations.append, min_rel_improvement=0.0,
                           patience=2)
     assert iterations == [0, 1, 2, 3]
 
@@ -559,13 +559,13 @@ def test_gp_training_stops_when_the_loss_stalls():
     gp_model = MGPR((X, Y))
     start = gp_model._model_losses().sum()
     iterations = []
-    gp_model.optimize(maxiter=100, callback=iterations.append, min_improvement=1e9, patience=2)
+    gp_model.optimize(maxiter=100, callback=iterations.append, min_rel_improvement=1e9, patience=2)
     assert iterations == [0, 1, 2]
     assert gp_model._model_losses().sum() < start
-    with pytest.raises(ValueError, match="min_improvement must be a finite number >= 0"):
-        gp_model.optimize(min_improvement=-0.5)
-    with pytest.raises(TypeError, match="min_improvement must be a finite number >= 0"):
-        gp_model.optimize(min_improvement="1")
+    with pytest.raises(ValueError, match="min_rel_improvement must be a finite number >= 0"):
+        gp_model.optimize(min_rel_improvement=-0.5)
+    with pytest.raises(TypeError, match="min_rel_improvement must be a finite number >= 0"):
+        gp_model.optimize(min_rel_improvement="1")
 
 
 def test_experiment_config_rejects_an_unknown_early_stop_rule():
@@ -574,3 +574,26 @@ def test_experiment_config_rejects_an_unknown_early_stop_rule():
     assert ExperimentConfig("t", "id", policy_early_stop="solved").policy_early_stop == "solved"
     with pytest.raises(ValueError, match="policy_early_stop must be 'always' or 'solved'"):
         ExperimentConfig("t", "id", policy_early_stop="never")
+
+
+@pytest.mark.parametrize("scale", [1.0, 1000.0])
+def test_stall_rule_is_relative_to_the_loss(scale):
+    """The same relative bar stops runs on losses of any scale at the same point: a loss
+    falling 0.2 % per iteration passes a 0.5 % bar over 3 iterations, 0.1 % does not."""
+    from pilco.snapshots import Stalled, TrackingScipy
+
+    def iterations_until_stop(rate):
+        opt = TrackingScipy()
+        on_step = opt.step_callback(min_rel_improvement=0.005, patience=3)
+        loss = 10.0 * scale
+        for it in range(50):
+            opt.run_best_loss = loss
+            try:
+                on_step(it, None, None)
+            except Stalled as stop:
+                return stop.iterations
+            loss -= rate * abs(loss)
+        return None
+
+    assert iterations_until_stop(0.002) is None
+    assert iterations_until_stop(0.001) == 4

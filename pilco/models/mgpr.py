@@ -30,7 +30,7 @@ import numpy as np
 import tensorflow as tf
 
 from .. import moments
-from ..snapshots import Stalled, TrackingScipy, check_min_improvement, restore, snapshot
+from ..snapshots import Stalled, TrackingScipy, check_min_rel_improvement, restore, snapshot
 from ..validation import (
     check_data,
     check_gaussian,
@@ -193,7 +193,7 @@ class MGPR(gpflow.base.Module):
 
     def optimize(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
                  callback: Optional[Callable[[int], None]] = None,
-                 min_improvement: Optional[float] = None, patience: int = 10):
+                 min_rel_improvement: Optional[float] = None, patience: int = 10):
         """Maximise the evidence of every output's GP with L-BFGS-B (gpflow Scipy).
 
         The first run starts from the current hyperparameters; each further restart starts
@@ -201,14 +201,15 @@ class MGPR(gpflow.base.Module):
         best values of each output across runs are kept (copies of the values, not
         references to the live variables). ``callback(iteration)`` is called after every
         L-BFGS iteration (progress bars; an exception it raises stops training). With
-        ``min_improvement``, a run stops once the summed loss (negative log evidence plus
-        the soft bounds) fell by less than that over the last ``patience`` iterations.
+        ``min_rel_improvement``, a run stops once the summed loss (negative log evidence plus
+        the soft bounds) fell by less than ``min_rel_improvement * max(1, |loss|)`` over the
+        last ``patience`` iterations.
         Returns the final per-output losses [E].
         """
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
         patience = check_positive_int(patience, "patience")
-        min_improvement = check_min_improvement(min_improvement)
+        min_rel_improvement = check_min_rel_improvement(min_rel_improvement)
         rng = np.random.default_rng(check_seed(seed))
         opt = self._optimizer  # one instance: its compiled objective is reused across calls
         groups = self._selection_groups()
@@ -246,7 +247,7 @@ class MGPR(gpflow.base.Module):
             try:
                 opt.minimize(self._training_loss, self.trainable_variables,
                              options=dict(maxiter=maxiter), method="L-BFGS-B",
-                             step_callback=opt.step_callback(callback, min_improvement,
+                             step_callback=opt.step_callback(callback, min_rel_improvement,
                                                              patience, what="GP loss"))
             except Stalled as stop:
                 logger.debug("GP training run %d stopped early after %d iterations", r,

@@ -28,7 +28,7 @@ from gpflow.config import default_float
 
 from .. import moments
 from ..angles import augment_state
-from ..snapshots import Stalled, TrackingScipy, check_min_improvement, restore, snapshot
+from ..snapshots import Stalled, TrackingScipy, check_min_rel_improvement, restore, snapshot
 from ..validation import (
     _to_numpy,
     as_2d_float,
@@ -371,15 +371,15 @@ class PILCO(gpflow.base.Module):
     # -- learning ---------------------------------------------------------------------------
     def optimize_models(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
                         callback: Optional[Callable[[int], None]] = None,
-                        min_improvement: Optional[float] = None, patience: int = 10):
+                        min_rel_improvement: Optional[float] = None, patience: int = 10):
         """Train the dynamics GPs by evidence maximisation; returns per-output losses [E].
 
-        ``callback(iteration)`` is called after every L-BFGS iteration; ``min_improvement``
+        ``callback(iteration)`` is called after every L-BFGS iteration; ``min_rel_improvement``
         and ``patience`` stop a stalled run early (see :meth:`MGPR.optimize`).
         """
         t0 = time.perf_counter()
         losses = self.mgpr.optimize(maxiter=maxiter, restarts=restarts, seed=seed,
-                                    callback=callback, min_improvement=min_improvement,
+                                    callback=callback, min_rel_improvement=min_rel_improvement,
                                     patience=patience)
         logger.info("dynamics model trained in %.2f s", time.perf_counter() - t0)
         return losses
@@ -398,7 +398,7 @@ class PILCO(gpflow.base.Module):
 
     def optimize_policy(self, maxiter: int = 50, restarts: int = 1, seed: Optional[int] = None,
                         callback: Optional[Callable[[int], None]] = None,
-                        method: str = "L-BFGS-B", min_improvement: Optional[float] = None,
+                        method: str = "L-BFGS-B", min_rel_improvement: Optional[float] = None,
                         patience: int = 10):
         """Maximise the predicted total reward over the policy parameters (L-BFGS-B or BFGS).
 
@@ -414,9 +414,9 @@ class PILCO(gpflow.base.Module):
 
         ``method`` is ``"L-BFGS-B"`` or ``"BFGS"`` (a dense inverse-Hessian update, what
         the MATLAB release's ``minimize`` uses for up to 1000 parameters). With
-        ``min_improvement`` set, a run stops once its best expected return has grown by
-        less than that over the last ``patience`` iterations (a converged run then costs a
-        few iterations instead of ``maxiter``).
+        ``min_rel_improvement`` set, a run stops once its best expected return has grown by
+        less than ``min_rel_improvement * max(1, |return|)`` over the last ``patience``
+        iterations (a converged run then costs a few iterations instead of ``maxiter``).
         """
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
@@ -424,7 +424,7 @@ class PILCO(gpflow.base.Module):
         if not isinstance(method, str) or method.upper() not in POLICY_METHODS:
             raise ValueError(f"method must be one of {POLICY_METHODS}, got {method!r}")
         method = method.upper()
-        min_improvement = check_min_improvement(min_improvement)
+        min_rel_improvement = check_min_rel_improvement(min_rel_improvement)
         rng = np.random.default_rng(check_seed(seed))
         self._refresh_dynamics()
         variables = self.controller.trainable_variables
@@ -449,7 +449,7 @@ class PILCO(gpflow.base.Module):
                 opt.minimize(
                     self._policy_loss, variables, method=method,
                     options=dict(maxiter=maxiter), tf_fun_args=dict(autograph=False),
-                    step_callback=opt.step_callback(callback, min_improvement, patience,
+                    step_callback=opt.step_callback(callback, min_rel_improvement, patience,
                                                     what="negative expected return"),
                 )
             except Stalled as stop:
