@@ -16,7 +16,7 @@ import numpy as np
 import tensorflow as tf
 from gpflow.utilities import parameter_dict
 
-__all__ = ["snapshot", "restore", "Stalled", "TrackingScipy", "check_min_rel_improvement"]
+__all__ = ["snapshot", "restore", "Stalled", "TrackingScipy"]
 
 logger = logging.getLogger(__name__)
 
@@ -98,14 +98,3 @@ class TrackingScipy(gpflow.optimizers.Scipy):
 
         return on_step
 
-
-def check_min_rel_improvement(value, name: str = "min_rel_improvement") -> Optional[float]:
-    """``None`` or a finite number >= 0, else ValueError/TypeError naming ``name``."""
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name} must be a finite number >= 0 or None, got "
-                        f"{type(value).__name__}")
-    if not np.isfinite(value) or value < 0:
-        raise ValueError(f"{name} must be a finite number >= 0 or None, got {value!r}")
-    return float(value)

@@ -156,6 +156,18 @@ def check_positive_float(value, name: str) -> float:
     return value
 
 
+def check_min_rel_improvement(value, name: str = "min_rel_improvement") -> Optional[float]:
+    """``None`` or a finite number >= 0 (an optimiser's early-stop bar), or a clear error."""
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.number)):
+        raise TypeError(f"{name} must be a finite number >= 0 or None, got "
+                        f"{type(value).__name__}")
+    if not np.isfinite(value) or value < 0:
+        raise ValueError(f"{name} must be a finite number >= 0 or None, got {value!r}")
+    return float(value)
+
+
 def check_seed(seed, name: str = "seed") -> Optional[int]:
     """A random seed: None or a non-negative integer, or a clear error."""
     if seed is None:

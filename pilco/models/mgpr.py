@@ -30,10 +30,11 @@ import numpy as np
 import tensorflow as tf
 
 from .. import moments
-from ..snapshots import Stalled, TrackingScipy, check_min_rel_improvement, restore, snapshot
+from ..snapshots import Stalled, TrackingScipy, restore, snapshot
 from ..validation import (
     check_data,
     check_gaussian,
+    check_min_rel_improvement,
     check_positive_float,
     check_positive_int,
     check_seed,

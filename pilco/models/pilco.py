@@ -28,7 +28,7 @@ from gpflow.config import default_float
 
 from .. import moments
 from ..angles import augment_state
-from ..snapshots import Stalled, TrackingScipy, check_min_rel_improvement, restore, snapshot
+from ..snapshots import Stalled, TrackingScipy, restore, snapshot
 from ..validation import (
     _to_numpy,
     as_2d_float,
@@ -37,6 +37,7 @@ from ..validation import (
     check_data,
     check_gaussian,
     check_indices,
+    check_min_rel_improvement,
     check_positive_int,
     check_seed,
 )
