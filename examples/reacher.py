@@ -113,19 +113,13 @@ def env_kwargs(args, damaged: bool) -> dict:
 
 def make_config(args, task: str, damaged: bool):
     from pilco.envs import FETCH_DAMAGED_ID, FETCH_ID
-    from pilco.runner import ExperimentConfig
+    from pilco.runner import ExperimentConfig, learning_settings
 
     return ExperimentConfig(
         task=task, env_id=FETCH_DAMAGED_ID if damaged else FETCH_ID, seed=args.seed,
         episodes=args.episodes, random_episodes=args.random_episodes, steps=args.horizon,
         env_kwargs={**env_kwargs(args, damaged), "max_episode_steps": args.horizon},
-        random_action_scale=args.random_action, max_data=args.max_data,
-        model_iters=args.model_iters, model_restarts=args.model_restarts,
-        model_min_rel_improvement=args.model_min_rel_improvement,
-        retrain_unchanged_model=args.retrain_unchanged_model,
-        policy_iters=args.policy_iters, policy_restarts=args.policy_restarts,
-        policy_method=args.policy_optimizer, policy_min_rel_improvement=args.policy_min_rel_improvement,
-        policy_patience=args.policy_patience, policy_early_stop=args.policy_early_stop,
+        random_action_scale=args.random_action, **learning_settings(args),
         cost_width=args.cost_width, success_threshold=args.threshold, solved_rule="reach",
         render=not args.no_render, predictions=not args.no_figures, quiet=args.quiet,
     )

@@ -56,6 +56,7 @@ __all__ = [
     "sigterm_as_keyboard_interrupt",
     "stop_requested",
     "add_common_arguments",
+    "learning_settings",
     "parse_args_with_resume",
     "write_json_atomic",
     "write_npz_atomic",
@@ -977,6 +978,21 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
                         "default %(default)s)")
     g.add_argument("--retrain-unchanged-model", action="store_true",
                    help="train the GPs again even if their training data did not change")
+
+
+def learning_settings(args: argparse.Namespace) -> Dict[str, Any]:
+    """The :class:`ExperimentConfig` fields set by :func:`add_common_arguments`' learning
+    flags, as keyword arguments."""
+    return dict(
+        max_data=args.max_data, model_iters=args.model_iters,
+        model_restarts=args.model_restarts,
+        model_min_rel_improvement=args.model_min_rel_improvement,
+        retrain_unchanged_model=args.retrain_unchanged_model,
+        policy_iters=args.policy_iters, policy_restarts=args.policy_restarts,
+        policy_method=args.policy_optimizer,
+        policy_min_rel_improvement=args.policy_min_rel_improvement,
+        policy_patience=args.policy_patience, policy_early_stop=args.policy_early_stop,
+    )
 
 
 def parse_args_with_resume(parser: argparse.ArgumentParser,
