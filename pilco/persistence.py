@@ -25,7 +25,6 @@ import inspect
 import json
 import logging
 import os
-import tempfile
 from typing import Dict, List, Sequence
 
 import gpflow
@@ -34,6 +33,7 @@ import numpy as np
 from . import __version__, moments
 from .controllers import LinearController, RbfController, squash_sat, squash_sin
 from .deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
+from .files import write_npz_atomic
 from .models.mgpr import MGPR
 from .models.pilco import PILCO
 from .models.smgpr import SMGPR
@@ -52,40 +52,6 @@ _SQUASH_KIND = {None: "none", "squash_sin": "sin", "squash_sat": "sat"}
 
 
 # -- files ----------------------------------------------------------------------------------
-def _atomic_savez(path, arrays: Dict[str, np.ndarray]) -> str:
-    """Write ``arrays`` as a compressed ``.npz`` at exactly ``path``, atomically."""
-    path = os.path.abspath(os.fspath(path))
-    directory = os.path.dirname(path)
-    os.makedirs(directory, exist_ok=True)
-    mode = (os.stat(path).st_mode & 0o777) if os.path.exists(path) else 0o644
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp",
-                               dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    try:  # make the rename itself durable (POSIX); not possible on every platform
-        dir_fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return path
-    try:
-        os.fsync(dir_fd)
-    except OSError:
-        pass
-    finally:
-        os.close(dir_fd)
-    return path
-
-
 def _read_npz(path, expected_format: str):
     """Arrays and metadata of a file written by this module; clear errors otherwise."""
     path = os.fspath(path)
@@ -320,7 +286,7 @@ def save_agent(agent: PILCO, path) -> str:
         trainable=trainable,
     )
     arrays[META_KEY] = np.array(json.dumps(meta))
-    written = _atomic_savez(path, arrays)
+    written = write_npz_atomic(path, arrays)
     logger.info("saved PILCO agent (%d transitions) to %s", len(X), written)
     return written
 
@@ -406,6 +372,6 @@ def export_policy(agent, path) -> str:
                 control_dim=controller.control_dim, feature_dim=controller.state_dim,
                 angle_indices=angle_indices)
     arrays[META_KEY] = np.array(json.dumps(meta))
-    written = _atomic_savez(path, arrays)
+    written = write_npz_atomic(path, arrays)
     logger.info("exported %s policy (%s squash) to %s", kind, squash, written)
     return written

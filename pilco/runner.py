@@ -34,17 +34,17 @@ import argparse
 import contextlib
 import dataclasses
 import importlib.util
-import io
 import json
 import logging
 import os
 import signal
 import sys
-import tempfile
 import time
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
+
+from .files import write_json_atomic, write_npz_atomic
 
 __all__ = [
     "Episode",
@@ -69,46 +69,6 @@ PHASES = ("interaction", "model", "policy")
 
 
 # ----------------------------------------------------------------------------- files
-def _atomic_write(path: str, write: Callable[[io.BufferedWriter], None]) -> None:
-    """Write through a temporary file in the same directory, then rename over ``path``."""
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.basename(path), dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
-def write_npz_atomic(path: str, arrays: Dict[str, np.ndarray]) -> None:
-    """Save ``{name: array}`` to ``path`` (compressed ``.npz``) atomically."""
-    _atomic_write(path, lambda f: np.savez_compressed(f, **arrays))
-
-
-def _json_default(obj):
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.floating):
-        return float(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
-
-
-def write_json_atomic(path: str, obj: Any) -> None:
-    """Save ``obj`` as indented JSON to ``path`` atomically (NumPy scalars allowed)."""
-    text = json.dumps(obj, indent=2, default=_json_default) + "\n"
-    _atomic_write(path, lambda f: f.write(text.encode("utf-8")))
-
-
 def persistence_available() -> bool:
     """True when :mod:`pilco.persistence` (``PILCO.save`` / ``PILCO.load``) exists."""
     try:
