@@ -1,151 +1,38 @@
 """PILCO on the MATLAB release's cart-pole swing-up (paper §5.3).
 
-Defaults follow the release (``settings_cp.m``) and the paper: 8 episodes in all (1 with
-random forces uniform in ±10 N, then 7 learned), horizon 40 steps of 0.1 s, start
-N(0, diag(0.1²)) (so ``m_init = 0``, ``S_init = 0.01 I``), angle θ fed to the GP and the
-policy as (sin θ, cos θ), an RBF policy of 10 basis functions (centres drawn from the
-start distribution as the release does, ``--policy-init random`` for N(0, I)) with the
-saturating squashing to ±10 N, the saturating cost of the pendulum tip's distance to the
-upright target (width 0.25 m); the release optimises the policy with BFGS for up to 150
-line searches and trains the GPs with up to 300 (here: scipy's BFGS for the policy, 150
-iterations, and L-BFGS-B for the GPs, 300 iterations).
-
-Two time savers, both switchable (0 turns them off): GP training stops once its loss fell
-by less than 0.05 % over 10 iterations (``--model-min-rel-improvement``), and policy
-optimisation once its predicted return grew by less than 0.3 % over 10 iterations
-(``--policy-min-rel-improvement``; ``--policy-early-stop solved`` applies it only after an
-episode was solved).
-
-The run is "solved" when, in a learned episode, the tip stays within 0.1 m of the
-target for the last 10 steps.
+8 episodes (1 with random forces, 7 learned) of 40 steps of 0.1 s; the release's
+settings: an RBF policy of 10 basis functions drawn from the start distribution, the
+saturating cost of the pendulum tip's distance to upright (width 0.25 m), BFGS for the
+policy, L-BFGS-B for the GPs, both stopping once they stall. Solved: the tip stays within
+0.1 m of the target for the last 10 steps of an episode. Every setting is a flag
+(``--help``); the task itself is :mod:`pilco.tasks.cartpole`.
 
 Usage::
 
     python examples/cartpole.py --seed 0
     python examples/cartpole.py --resume runs/cartpole-seed0 --episodes 12
 """
-from __future__ import annotations
-
-import argparse
 import os
 import sys
 
-# TensorFlow's C++ log lines (CUDA probing, op errors the optimiser recovers from and logs
-# itself) drown the progress output; PILCO's own messages go through `logging`.
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
-from typing import Optional, Sequence
+os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-
-# 8 episodes: the paper's Python/GPU port took 671 s in all (MATLAB: 1265 s).
-PAPER_SECONDS = {"total": 671.0}
+from pilco.experiment.cli import finish  # noqa: E402
+from pilco.tasks import cartpole  # noqa: E402
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from pilco.runner import add_common_arguments
-
-    parser = argparse.ArgumentParser(description="PILCO cart-pole swing-up (MATLAB protocol)",
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    add_common_arguments(parser, episodes=8, steps=40, basis_functions=10, policy_iters=150,
-                         model_iters=300, max_data=None, output="runs/cartpole-seed{seed}",
-                         policy_method="BFGS", policy_min_rel_improvement=0.003,
-                         model_min_rel_improvement=5e-4)
-    g = parser.add_argument_group("cart-pole")
-    g.add_argument("--max-force", type=float, default=10.0, help="force bound [N]")
-    g.add_argument("--cost-width", type=float, default=0.25,
-                   help="width [m] of the saturating cost on the tip distance")
-    g.add_argument("--start-std", type=float, default=0.1, help="std of the start state")
-    g.add_argument("--noise-std", type=float, default=0.01, help="measurement noise std")
-    g.add_argument("--threshold", type=float, default=0.1,
-                   help="solved: tip within this distance [m] ...")
-    g.add_argument("--hold-steps", type=int, default=10, help="... for the last N steps")
-    g.add_argument("--squash", choices=("sat", "sin"), default="sat",
-                   help="policy squashing function")
-    g.add_argument("--policy-input-noise", choices=("on", "off"), default="off",
-                   help="'on': the policy sees a noisy measurement of the predicted state "
-                        "(variance + half the dynamics noise), as the release's propagate.m")
-    g.add_argument("--policy-init", choices=("start", "random"), default="start",
-                   help="initial RBF policy: 'start' draws its centers from the start "
-                        "distribution as the MATLAB release does; 'random' from N(0, I)")
-    return parser
-
-
-def agent_builder(args):
-    """``(data, start_states) -> PILCO`` for the cart-pole with the settings in ``args``."""
-    import numpy as np
-
-    from pilco.controllers import RbfController, squash_sat, squash_sin
-    from pilco.models import PILCO
-    from pilco.rewards import CartPoleReward
-
-    def build(data, start_states):  # noqa: ARG001 - the start distribution is known
-        squash = squash_sat if args.squash == "sat" else squash_sin
-        controller = RbfController(5, 1, args.basis_functions, args.max_force, squash,
-                                   seed=args.seed)
-        if args.policy_init == "start":
-            # as the MATLAB release: centers drawn from the start distribution (policy
-            # input [x, dx, dtheta, sin theta, cos theta]), targets 0.1 N(0, 1),
-            # lengthscales (1, 1, 1, 0.7, 0.7)
-            rng = np.random.default_rng(args.seed)
-            x0 = args.start_std * rng.standard_normal((args.basis_functions, 4))
-            centers = np.column_stack([x0[:, :3], np.sin(x0[:, 3]), np.cos(x0[:, 3])])
-            targets = 0.1 * rng.standard_normal((args.basis_functions, 1))
-            controller.set_data((centers, targets))
-            controller.models[0].kernel.lengthscales.assign([1.0, 1.0, 1.0, 0.7, 0.7])
-        return PILCO(data, controller, CartPoleReward(pendulum_length=0.5, width=args.cost_width),
-                     horizon=args.horizon, m_init=np.zeros((1, 4)),
-                     S_init=args.start_std ** 2 * np.eye(4), angle_indices=[3],
-                     policy_input_noise=args.policy_input_noise == "on")
-
-    return build
-
-
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    from pilco import runner
-    from pilco.envs import CARTPOLE_ID
-
-    parser = build_parser()
-    args = runner.parse_args_with_resume(parser, argv)
-    runner.configure_logging(args.log_level)
-    config = runner.ExperimentConfig(
-        task="cartpole", env_id=CARTPOLE_ID, seed=args.seed, episodes=args.episodes,
-        random_episodes=args.random_episodes, steps=args.horizon,
-        env_kwargs=dict(max_force=args.max_force, cost_width=args.cost_width,
-                        start_std=args.start_std, noise_std=args.noise_std,
-                        max_episode_steps=args.horizon),
-        random_action_scale=None, **runner.learning_settings(args),
-        cost_width=args.cost_width, success_threshold=args.threshold, solved_rule="hold",
-        hold_steps=args.hold_steps, render=not args.no_render,
-        predictions=not args.no_figures, quiet=args.quiet,
-    )
-    build = agent_builder(args)
-    if args.resume:
-        exp = runner.Experiment.resume(args.output, config, build, args=vars(args))
-    else:
-        exp = runner.Experiment(config, args.output, build, args=vars(args))
+def main(argv=None) -> int:
+    # 1. settings (the release's defaults; --resume DIR continues a saved run)
+    args = cartpole.parse_args(argv)
+    # 2. the task: cart-pole env, RBF policy, GP dynamics, saturating cost, run directory
+    exp = cartpole.make_experiment(args)
+    # 3. PILCO: a random episode, then per episode: train GPs, optimise policy, apply it
     summary = exp.run()
-    print(runner.format_episode_table(summary))
-    print()
-    print(runner.format_timing_table(summary["seconds"], title=f"Timing (cartpole, seed "
-                                     f"{args.seed}, {len(summary['episodes'])} episodes)",
-                                     reference=PAPER_SECONDS))
-    if exp.interrupted:
-        print(f"\nInterrupted: agent and data saved in {exp.directory}; continue with "
-              f"--resume {exp.directory}")
-        exp.close()
-        return 130
-    if not args.no_figures:
-        from pilco import plotting
-
-        paths = plotting.save_all(exp, exp.directory, title="cart-pole swing-up",
-                                  state_dims=(0, 3), state_names=("x [m]", "θ [rad]"),
-                                  distance_label="tip distance to target [m]",
-                                  threshold=args.threshold)
-        print(f"\nFigures: {', '.join(os.path.basename(p) for p in paths)}")
-    print(f"Solved: {summary['solved']} (episode {summary['solved_at_episode']}); "
-          f"results in {exp.directory}")
-    exp.close()
-    return 0
+    # 4. report: tables, figures, the final episode as a GIF (exit 130 after Ctrl-C)
+    return finish(exp, summary, args, reference=cartpole.PAPER_SECONDS,
+                  title=f"Timing (cartpole, seed {args.seed}, "
+                        f"{len(summary['episodes'])} episodes)",
+                  figures=lambda: cartpole.figures(exp, args))
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@
 - :func:`plot_multi_step`: the multi-step predicted trajectory (from the episode's start
   distribution, the policy of that episode) with its ±2σ band against the real one;
 - :func:`save_frames`: the frames of an episode as a GIF (imageio) or a PNG strip;
-- :func:`save_all`: every figure of a :class:`pilco.runner.Experiment`.
+- :func:`save_all`: every figure of a :class:`pilco.experiment.Experiment`.
 
 The figures are built with ``matplotlib.figure.Figure`` and the Agg canvas directly, so
 the global pyplot state and backend are left alone.
@@ -225,14 +225,14 @@ def save_all(exp, out: str, title: str = "", state_dims: Sequence[int] = (0, 1, 
              state_names: Optional[Sequence[str]] = None,
              distance_label: str = "distance to target", threshold: Optional[float] = None,
              marks: Optional[Sequence[int]] = None) -> List[str]:
-    """Every figure of a finished :class:`pilco.runner.Experiment` into ``out``.
+    """Every figure of a finished :class:`pilco.experiment.Experiment` into ``out``.
 
     Writes ``distance.png``, ``cost_prediction.png`` (last learned episode),
     ``one_step.png`` (learned episodes), ``multi_step.png`` (last learned episode) and
     ``final_episode.gif`` / ``final_episode_strip.png`` when frames were rendered.
     A figure that fails is logged and skipped. Returns the written paths.
     """
-    from .runner import saturating_cost
+    from .experiment.scoring import saturating_cost
 
     names = list(state_names) if state_names is not None else [f"x[{d}]" for d in state_dims]
     written: List[str] = []

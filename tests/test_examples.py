@@ -28,7 +28,8 @@ TIMEOUT = 600
 
 EPISODE_KEYS = {"episode", "random", "steps", "cost", "final_distance", "min_distance",
                 "steps_to_target", "seconds"}
-SUMMARY_KEYS = {"task", "seed", "solved", "solved_at_episode", "episodes", "seconds"}
+SUMMARY_KEYS = {"task", "seed", "solved", "solved_at_episode", "episodes", "seconds",
+                "complete", "success", "distances"}
 PHASE_KEYS = {"interaction", "model", "policy"}
 FIGURES = ["distance.png", "cost_prediction.png", "one_step.png", "multi_step.png"]
 
@@ -108,6 +109,9 @@ def _check_summary(s, task, episodes, extra=()):
     assert isinstance(s["solved"], bool)
     assert s["solved_at_episode"] is None or isinstance(s["solved_at_episode"], int)
     assert s["solved"] == (s["solved_at_episode"] is not None)
+    assert isinstance(s["complete"], bool) and isinstance(s["success"], bool)
+    assert len(s["distances"]) == episodes
+    assert [len(d) for d in s["distances"]] == [e["steps"] + 1 for e in s["episodes"]]
     assert set(s["seconds"]) == PHASE_KEYS | {"total"}
     assert all(isinstance(v, float) and v >= 0 for v in s["seconds"].values())
     assert len(s["episodes"]) == episodes
@@ -154,6 +158,7 @@ def test_cartpole_summary_data_figures(runs):
     assert "Controller optimisation" in out and "Whole program" in out
     s = _load_summary(d)
     _check_summary(s, "cartpole", 3)
+    assert s["complete"] is True and s["success"] == s["solved"]
     _check_data(d, s, 4, 1)
     for name in FIGURES + ["final_episode.gif", "final_episode_strip.png"]:
         assert (d / name).stat().st_size > 0, name
@@ -167,8 +172,7 @@ def test_cartpole_resume_continues(runs):
     assert progress["interrupted"] is False
     assert progress["args"]["horizon"] == 8  # settings of the first run were kept
     assert progress["args"]["episodes"] == 3  # ... except those given again
-    if progress["agent_saved"]:
-        assert (d / "agent.npz").exists()
+    assert progress["agent_saved"] is True and (d / "agent.npz").exists()
     before = runs["cartpole_interrupted_summary"]["episodes"]
     after = _load_summary(d)["episodes"]
     assert after[: len(before)] == before  # the interrupted run's episodes were kept
@@ -180,6 +184,7 @@ def test_sigterm_saves_and_exits_cleanly(runs):
     assert "Interrupted" in out and "--resume" in out and "Traceback" not in out
     s = runs["cartpole_interrupted_summary"]
     assert 2 <= len(s["episodes"]) < 6
+    assert s["complete"] is False
     _check_summary(s, "cartpole", len(s["episodes"]))
 
 
@@ -189,6 +194,9 @@ def test_reacher(runs, name, task):
     d, out = _ok(runs[name])
     s = _load_summary(d)
     _check_summary(s, task, 2)
+    last = s["episodes"][-1]
+    assert s["success"] == (last["steps_to_target"] is not None
+                            and last["steps_to_target"] <= 15)
     _check_data(d, s, 10, 7)
     for figure in FIGURES:
         assert (d / figure).stat().st_size > 0, figure
@@ -201,5 +209,6 @@ def test_adaptation(runs):
     _check_summary(s, "adaptation", 3, extra=("damage_at_episode", "episodes_to_recover"))
     assert s["damage_at_episode"] == 3
     assert s["episodes_to_recover"] is None or s["episodes_to_recover"] == 1
+    assert s["success"] == (s["episodes_to_recover"] is not None) and s["complete"] is True
     _check_data(d, s, 10, 7)
     assert (d / "adaptation_distance.png").stat().st_size > 0

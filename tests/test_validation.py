@@ -569,7 +569,7 @@ def test_gp_training_stops_when_the_loss_stalls():
 
 
 def test_experiment_config_rejects_an_unknown_early_stop_rule():
-    from pilco.runner import ExperimentConfig
+    from pilco.experiment import ExperimentConfig
 
     assert ExperimentConfig("t", "id", policy_early_stop="solved").policy_early_stop == "solved"
     with pytest.raises(ValueError, match="policy_early_stop must be 'always' or 'solved'"):

@@ -1,0 +1,28 @@
+"""Running PILCO experiments: episodes, the learning loop, the run directory, the
+command line shared by the tasks.
+
+=================  ==============================================================
+module             job
+=================  ==============================================================
+``episode``        :class:`Episode`, :func:`rollout`, :func:`make_env`
+``config``         :class:`ExperimentConfig`, the settings of a run
+``loop``           :class:`Experiment`, the paper's Algorithm 1 with saving/resume
+``learning``       the model and policy phases of a learned episode, predictions
+``scoring``        saturating cost, the solved rule, per-episode records
+``store``          :class:`RunStore`, the files of a run directory
+``signals``        SIGTERM as a stop at the next safe point
+``progress``       progress bars and the optimisers' callback
+``report``         the timing and episode tables
+``cli``            shared flags, ``--resume``, logging, the end of every ``main``
+=================  ==============================================================
+
+This package logs through :mod:`logging`; only ``cli.finish`` prints (for the scripts).
+"""
+from .config import ExperimentConfig
+from .episode import Episode, make_env, rollout
+from .loop import Experiment
+from .scoring import PHASES, episode_solved, saturating_cost
+from .store import RunStore
+
+__all__ = ["Episode", "Experiment", "ExperimentConfig", "PHASES", "RunStore",
+           "episode_solved", "make_env", "rollout", "saturating_cost"]

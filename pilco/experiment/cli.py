@@ -1,0 +1,138 @@
+"""The command line shared by the tasks: common flags, ``--resume``, logging, and the
+one shared end of every task's ``main`` (tables, figures, exit status)."""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+from typing import Any, Callable, Dict, List, Optional, Sequence
+
+from .report import format_episode_table, format_timing_table
+
+__all__ = ["add_common_arguments", "learning_settings", "parse_args_with_resume",
+           "configure_logging", "finish"]
+
+
+def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, steps: int,
+                         basis_functions: int, policy_iters: int, model_iters: int,
+                         policy_restarts: int = 1, model_restarts: int = 1,
+                         policy_method: str = "L-BFGS-B",
+                         policy_min_rel_improvement: Optional[float] = None,
+                         model_min_rel_improvement: Optional[float] = None,
+                         policy_early_stop: str = "always",
+                         max_data: Optional[int] = None, random_episodes: int = 1,
+                         output: str = "runs/run-seed{seed}") -> None:
+    """Flags shared by the tasks (defaults given per task)."""
+    g = parser.add_argument_group("experiment")
+    for name, default, text in (
+            ("--seed", 0, "random seed"),
+            ("--episodes", episodes, "total episodes including the random ones"),
+            ("--random-episodes", random_episodes, "episodes with random actions first"),
+            ("--horizon", steps, "steps per episode and planning horizon")):
+        g.add_argument(name, type=int, default=default, help=f"{text} (default %(default)s)")
+    g.add_argument("--output", default=output,
+                   help="run directory (default %(default)s; {seed} is replaced)")
+    g.add_argument("--resume", metavar="DIR", default=None,
+                   help="continue the run saved in DIR with its next episode")
+    for name, text in (("--quiet", "no progress bars"),
+                       ("--no-render", "do not render the last episode"),
+                       ("--no-figures", "do not draw figures")):
+        g.add_argument(name, action="store_true", help=text)
+    g.add_argument("--log-level", default="WARNING", help="logging level (default %(default)s)")
+    g = parser.add_argument_group("learning")
+    for name, default, text in (
+            ("--basis-functions", basis_functions, "RBF policy basis functions"),
+            ("--policy-iters", policy_iters, "optimiser iterations per policy optimisation"),
+            ("--policy-restarts", policy_restarts, "policy optimisation restarts"),
+            ("--policy-patience", 10, "iterations for --policy-min-rel-improvement"),
+            ("--model-iters", model_iters, "L-BFGS iterations of GP training"),
+            ("--model-restarts", model_restarts, "GP training restarts"),
+            ("--max-data", max_data,
+             "GP learns from the first N transitions only (0 or None: all)")):
+        g.add_argument(name, type=int, default=default, help=f"{text} (default %(default)s)")
+    g.add_argument("--policy-optimizer", choices=("L-BFGS-B", "BFGS"), type=str.upper,
+                   default=policy_method,
+                   help="policy optimiser (BFGS: dense update, as the MATLAB release; "
+                        "default %(default)s)")
+    g.add_argument("--policy-min-rel-improvement", type=float, default=policy_min_rel_improvement,
+                   help="stop a policy optimisation once its predicted return grew by less "
+                        "than this fraction of it over the last --policy-patience iterations "
+                        "(default %(default)s; 0 or None: never)")
+    g.add_argument("--policy-early-stop", choices=("always", "solved"),
+                   default=policy_early_stop,
+                   help="apply --policy-min-rel-improvement always, or only once an episode "
+                        "was solved (default %(default)s)")
+    g.add_argument("--model-min-rel-improvement", type=float, default=model_min_rel_improvement,
+                   help="stop GP training once its loss fell by less than this fraction of "
+                        "it over the last 10 iterations (default %(default)s; 0 or None: never)")
+    g.add_argument("--retrain-unchanged-model", action="store_true",
+                   help="train the GPs again even if their training data did not change")
+
+
+def learning_settings(args: argparse.Namespace) -> Dict[str, Any]:
+    """The :class:`ExperimentConfig` fields set by :func:`add_common_arguments`' learning
+    flags, as keyword arguments."""
+    return dict(
+        max_data=args.max_data, model_iters=args.model_iters,
+        model_restarts=args.model_restarts,
+        model_min_rel_improvement=args.model_min_rel_improvement,
+        retrain_unchanged_model=args.retrain_unchanged_model,
+        policy_iters=args.policy_iters, policy_restarts=args.policy_restarts,
+        policy_method=args.policy_optimizer,
+        policy_min_rel_improvement=args.policy_min_rel_improvement,
+        policy_patience=args.policy_patience, policy_early_stop=args.policy_early_stop,
+    )
+
+
+def parse_args_with_resume(parser: argparse.ArgumentParser,
+                           argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    """Parse ``argv``; with ``--resume DIR`` the settings saved in ``DIR/progress.json``
+    become the defaults, so only flags given again (e.g. ``--episodes``) change."""
+    args = parser.parse_args(argv)
+    if args.resume:
+        path = os.path.join(args.resume, "progress.json")
+        if not os.path.exists(path):
+            parser.error(f"--resume {args.resume}: no progress.json there")
+        with open(path, encoding="utf-8") as f:
+            saved = json.load(f).get("args", {})
+        known = {a.dest for a in parser._actions}  # noqa: SLF001 - argparse has no API
+        parser.set_defaults(**{k: v for k, v in saved.items() if k in known})
+        args = parser.parse_args(argv)
+        args.output = args.resume
+    else:
+        args.output = args.output.format(seed=args.seed)
+    return args
+
+
+def configure_logging(level: str) -> None:
+    """Basic logging to stderr for the example scripts (also quiets TensorFlow's C++)."""
+    logging.basicConfig(level=getattr(logging, str(level).upper(), logging.WARNING),
+                        format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+
+
+def finish(exp, summary: Dict[str, Any], args: argparse.Namespace, title: str,
+           reference: Optional[Dict[str, float]] = None,
+           figures: Optional[Callable[[], List[str]]] = None,
+           notes: Sequence[str] = ()) -> int:
+    """Print the episode and timing tables (and ``notes``), draw ``figures()`` unless
+    ``--no-figures``, close the env; returns the exit status: 130 after an interrupt
+    (with how to resume), else 0. The one shared end of every task's ``main``."""
+    print(format_episode_table(summary))
+    for note in notes:
+        print(note)
+    print()
+    print(format_timing_table(summary["seconds"], title=title, reference=reference))
+    try:
+        if exp.interrupted:
+            print(f"\nInterrupted: agent and data saved in {exp.directory}; continue with "
+                  f"--resume {exp.directory}")
+            return 130
+        if figures is not None and not args.no_figures:
+            paths = figures()
+            print(f"\nFigures: {', '.join(os.path.basename(p) for p in paths)}")
+        print(f"Solved: {summary['solved']} (episode {summary['solved_at_episode']}); "
+              f"success: {summary['success']}; results in {exp.directory}")
+        return 0
+    finally:
+        exp.close()

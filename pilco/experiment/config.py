@@ -1,0 +1,92 @@
+"""The settings of one PILCO run: :class:`ExperimentConfig`."""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Dict, Optional
+
+__all__ = ["ExperimentConfig"]
+
+
+@dataclasses.dataclass
+class ExperimentConfig:
+    """Settings of a run (everything a command line sets).
+
+    Attributes:
+        task: name written in the summary.
+        env_id: gymnasium id; ``env_kwargs`` go to ``gymnasium.make``.
+        seed: base seed (env resets, random actions, restarts).
+        episodes: total number of episodes, random ones included.
+        random_episodes: episodes with random actions at the start.
+        steps: steps per episode (the env may end an episode earlier).
+        random_action_scale: random actions uniform in ``±scale`` (``None``: uniform
+            over the env's action space).
+        max_data: the dynamics model learns from the first ``max_data`` transitions
+            only (``None`` or 0: all of them).
+        model_iters, model_restarts: L-BFGS iterations / restarts of GP training.
+        model_min_rel_improvement, model_patience: stop GP training once its loss fell by less
+            than ``model_min_rel_improvement`` (relative) over the last ``model_patience`` iterations
+            (``None``: always ``model_iters``).
+        policy_iters, policy_restarts: the same for the policy.
+        policy_method: ``"L-BFGS-B"`` or ``"BFGS"`` (see ``PILCO.optimize_policy``).
+        policy_min_rel_improvement, policy_patience: stop a policy optimisation run when its
+            predicted return grew by less than ``policy_min_rel_improvement`` (relative)
+            over the last ``policy_patience`` iterations (``None``: always ``policy_iters``).
+        policy_early_stop: ``"always"``, or ``"solved"``: the early stop applies only once
+            an episode has been solved (refining a policy that works needs few
+            iterations; before that, a slow stretch often precedes a large gain).
+        cost_width: width of the saturating cost of the distance (summary ``cost``).
+        success_threshold: distance [m] counted as "at the target".
+        solved_rule: ``"reach"``: an episode is solved when any state is within the
+            threshold; ``"hold"``: when the last ``hold_steps`` states all are.
+        retrain_unchanged_model: train the GPs again even when their training data did
+            not change since the last training (``max_data`` reached); by default the
+            trained hyperparameters are kept (the optimum is the same).
+        render: record frames of the final episode.
+        predictions: before each learned episode, store the model's multi-step
+            predictions and, after it, its one-step predictions (for the figures).
+        quiet: no progress bars.
+    """
+
+    task: str
+    env_id: str
+    seed: int = 0
+    episodes: int = 4
+    random_episodes: int = 1
+    steps: int = 50
+    env_kwargs: Dict[str, Any] = dataclasses.field(default_factory=dict)
+    random_action_scale: Optional[float] = None
+    max_data: Optional[int] = None
+    model_iters: int = 1000
+    model_restarts: int = 1
+    model_min_rel_improvement: Optional[float] = None
+    model_patience: int = 10
+    policy_iters: int = 50
+    policy_restarts: int = 1
+    policy_method: str = "L-BFGS-B"
+    policy_min_rel_improvement: Optional[float] = None
+    policy_patience: int = 10
+    policy_early_stop: str = "always"
+    cost_width: float = 0.25
+    success_threshold: float = 0.05
+    solved_rule: str = "reach"
+    hold_steps: int = 10
+    retrain_unchanged_model: bool = False
+    render: bool = True
+    predictions: bool = True
+    quiet: bool = False
+
+    def __post_init__(self):
+        if self.policy_early_stop not in ("always", "solved"):
+            raise ValueError(f"policy_early_stop must be 'always' or 'solved', got "
+                             f"{self.policy_early_stop!r}")
+        if self.solved_rule not in ("reach", "hold"):
+            raise ValueError(f"solved_rule must be 'reach' or 'hold', got {self.solved_rule!r}")
+        if self.random_episodes < 1:
+            raise ValueError("at least one random episode is needed to build the model")
+        if self.episodes < self.random_episodes:
+            raise ValueError(f"episodes ({self.episodes}) must be >= random_episodes "
+                             f"({self.random_episodes})")
+        if self.max_data == 0:
+            self.max_data = None
+        if self.max_data is not None and self.max_data < 2:
+            raise ValueError(f"max_data must be at least 2 (or None), got {self.max_data}")

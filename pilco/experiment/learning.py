@@ -1,0 +1,91 @@
+"""The learning phases of one episode: train the dynamics model, improve the policy,
+and the model's predictions kept for the figures."""
+from __future__ import annotations
+
+import logging
+from typing import Dict
+
+import numpy as np
+
+from .episode import Episode
+from .progress import optimizer_callback, progress_bar
+
+__all__ = ["train_model", "improve_policy", "predictions_before", "predictions_after"]
+
+logger = logging.getLogger(__name__)
+
+
+def train_model(exp, number: int) -> None:
+    """``optimize_models`` on the training data, unless they are exactly those of the
+    last training (``max_data`` reached) and ``retrain_unchanged_model`` is off: the
+    optimum is then the same, the hyperparameters are kept."""
+    cfg, agent = exp.config, exp.agent
+    X, Y = exp.training_data()
+    previous = exp.model_trained_on
+    if (previous is not None and not cfg.retrain_unchanged_model
+            and np.array_equal(previous[0], X) and np.array_equal(previous[1], Y)):
+        logger.info("episode %d: the model's training data are unchanged (max_data=%s); "
+                    "keeping its hyperparameters", number, cfg.max_data)
+        return
+    with progress_bar(cfg.model_iters * cfg.model_restarts, f"episode {number} model",
+                      cfg.quiet) as bar:
+        agent.optimize_models(maxiter=cfg.model_iters, restarts=cfg.model_restarts,
+                              seed=exp.episode_seed(number), callback=optimizer_callback(bar),
+                              min_rel_improvement=cfg.model_min_rel_improvement,
+                              patience=cfg.model_patience)
+        if exp.after_model_fit is not None:
+            exp.after_model_fit(agent)
+    exp.model_trained_on = (X.copy(), Y.copy())
+
+
+def improve_policy(exp, number: int) -> float:
+    """``optimize_policy`` with the run's settings; the relative early stop applies always
+    or, with ``policy_early_stop="solved"``, once an episode was solved. Returns the
+    predicted return."""
+    cfg, agent = exp.config, exp.agent
+    early_stop = cfg.policy_early_stop == "always" or exp.solved_at_episode() is not None
+    with progress_bar(cfg.policy_iters * cfg.policy_restarts, f"episode {number} policy",
+                      cfg.quiet) as bar:
+        expected = agent.optimize_policy(
+            maxiter=cfg.policy_iters, restarts=cfg.policy_restarts,
+            seed=exp.episode_seed(number), callback=optimizer_callback(bar),
+            method=cfg.policy_method,
+            min_rel_improvement=cfg.policy_min_rel_improvement if early_stop else None,
+            patience=cfg.policy_patience)
+    logger.info("episode %d: predicted return %.3f over %d steps", number, expected,
+                agent.horizon)
+    return expected
+
+
+def predictions_before(exp) -> Dict[str, np.ndarray]:
+    """The model's multi-step prediction of the coming episode (``pred_mean [T+1, D]``,
+    ``pred_var [T+1, D]``, ``pred_reward [T+1]``, ``pred_reward_var [T+1]``), when the
+    config asks for predictions. A failure is logged, never stops learning."""
+    if not exp.config.predictions:
+        return {}
+    try:
+        M, S, R, Rv = exp.agent.predict_trajectory_with_rewards(horizon=exp.config.steps)
+        return {"pred_mean": np.asarray(M),
+                "pred_var": np.stack([np.diag(s) for s in np.asarray(S)]),
+                "pred_reward": np.asarray(R), "pred_reward_var": np.asarray(Rv)}
+    except Exception as err:  # noqa: BLE001 - a figure must not stop learning
+        logger.warning("multi-step prediction failed: %s", err)
+        return {}
+
+
+def predictions_after(exp, episode: Episode) -> Dict[str, np.ndarray]:
+    """The model's one-step predictions along the episode that ran (``onestep_mean
+    [T, D]``, ``onestep_var [T, D]`` of the state change, noise included)."""
+    if not exp.config.predictions:
+        return {}
+    X, _ = episode.transitions()
+    if len(X) == 0:
+        return {}
+    try:
+        agent = exp.agent
+        mean, var = agent.mgpr.predict_f(agent.gp_inputs(X))
+        noise = np.asarray(agent.mgpr.noise_variance)
+        return {"onestep_mean": np.asarray(mean), "onestep_var": np.asarray(var) + noise[None, :]}
+    except Exception as err:  # noqa: BLE001
+        logger.warning("one-step prediction failed: %s", err)
+        return {}

@@ -1,0 +1,54 @@
+"""How an episode is scored: the saturating cost of the task distance, the solved
+rule, and the per-episode record written to ``summary.json``."""
+from __future__ import annotations
+
+from typing import Any, Dict
+
+import numpy as np
+
+from .config import ExperimentConfig
+from .episode import Episode
+
+__all__ = ["PHASES", "saturating_cost", "episode_solved", "episode_record"]
+
+#: the timed phases of a learned episode, as in the paper's timing table
+PHASES = ("interaction", "model", "policy")
+
+
+def saturating_cost(distance, width: float) -> np.ndarray:
+    """PILCO's saturating cost ``1 - exp(-d^2 / (2 width^2))`` of distances ``[...]``."""
+    d = np.asarray(distance, dtype=np.float64)
+    return 1.0 - np.exp(-(d ** 2) / (2.0 * float(width) ** 2))
+
+
+def episode_solved(episode: Episode, config: ExperimentConfig) -> bool:
+    """Whether an episode meets the task's rule: ``"reach"``, any state within
+    ``success_threshold``; ``"hold"``, the last ``hold_steps`` states all within it."""
+    d = episode.distances[1:]
+    if len(d) == 0 or not np.all(np.isfinite(d)):
+        return False
+    thr = config.success_threshold
+    if config.solved_rule == "reach":
+        return bool(np.any(d < thr))
+    k = config.hold_steps
+    return bool(len(d) >= k and np.all(d[-k:] < thr))
+
+
+def episode_record(episode: Episode, number: int, seconds: Dict[str, float],
+                   config: ExperimentConfig) -> Dict[str, Any]:
+    """The summary's record of episode ``number`` (1-based): steps, saturating cost of
+    the distances after the start, final and closest distance, first step within the
+    threshold (or None), seconds per phase."""
+    d = episode.distances
+    within = np.nonzero(d[1:] < config.success_threshold)[0]
+    cost = float(np.sum(saturating_cost(d[1:], config.cost_width)))
+    return {
+        "episode": int(number),
+        "random": bool(episode.random),
+        "steps": int(episode.steps),
+        "cost": cost,
+        "final_distance": float(d[-1]),
+        "min_distance": float(np.min(d[1:])) if episode.steps else float(d[0]),
+        "steps_to_target": int(within[0] + 1) if len(within) else None,
+        "seconds": {p: float(seconds.get(p, 0.0)) for p in PHASES},
+    }

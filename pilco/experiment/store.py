@@ -1,0 +1,132 @@
+"""The run directory: every file a run writes, and reading them back to resume.
+
+- ``data.npz``: every transition so far (``X [N, D+U]``, ``Y [N, D]``, ``episode [N]``),
+  every episode's ``states_k``, ``actions_k``, ``rewards_k``, ``distances_k`` and the
+  model's predictions made for it (``pred_*_k``, ``onestep_*_k``); after an interrupt also
+  the interrupted episode's complete transitions (``partial_*``);
+- ``agent.npz``: the agent (``PILCO.save``);
+- ``progress.json``: per-episode records, phase times, settings and task state, enough
+  to continue with the next episode;
+- ``summary.json``: the run's summary.
+
+Each file is written atomically (:mod:`pilco.files`), in the order data, agent,
+progress: a run stopped at any moment (even by SIGKILL) leaves every file either in its
+old or its new complete version, and ``progress.json`` never counts an episode whose
+data are not in ``data.npz``.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from ..files import write_json_atomic, write_npz_atomic
+from .episode import Episode
+
+__all__ = ["RunStore"]
+
+logger = logging.getLogger(__name__)
+
+#: prefixes of the per-episode prediction arrays in ``data.npz``
+PREDICTION_PREFIXES = ("pred_", "onestep_")
+
+
+class RunStore:
+    """The files of one run directory (created on construction)."""
+
+    def __init__(self, directory: str):
+        self.directory = os.path.abspath(directory)
+        os.makedirs(self.directory, exist_ok=True)
+        self.data_path, self.agent_path, self.progress_path, self.summary_path = (
+            self.path(name) for name in ("data.npz", "agent.npz", "progress.json",
+                                         "summary.json"))
+
+    def path(self, name: str) -> str:
+        """Absolute path of ``name`` inside the run directory."""
+        return os.path.join(self.directory, name)
+
+    # -- writing ------------------------------------------------------------------------
+    def save_data(self, episodes: Sequence[Episode],
+                  predictions: Sequence[Dict[str, np.ndarray]],
+                  partial: Optional[Episode] = None) -> None:
+        """Rewrite ``data.npz`` with every episode (and the interrupted one's transitions)."""
+        arrays: Dict[str, np.ndarray] = {}
+        if episodes:
+            pairs = [e.transitions() for e in episodes]
+            arrays["X"] = np.concatenate([p[0] for p in pairs])
+            arrays["Y"] = np.concatenate([p[1] for p in pairs])
+            arrays["episode"] = np.concatenate(
+                [np.full(e.steps, i + 1) for i, e in enumerate(episodes)])
+        for i, (e, prediction) in enumerate(zip(episodes, predictions), start=1):
+            arrays[f"states_{i}"] = e.states
+            arrays[f"actions_{i}"] = e.actions
+            arrays[f"rewards_{i}"] = e.rewards
+            arrays[f"distances_{i}"] = e.distances
+            for key, value in prediction.items():
+                arrays[f"{key}_{i}"] = value
+        if partial is not None and partial.steps > 0:
+            X, Y = partial.transitions()
+            arrays["partial_X"], arrays["partial_Y"] = X, Y
+            arrays["partial_states"] = partial.states
+            arrays["partial_actions"] = partial.actions
+        write_npz_atomic(self.data_path, arrays)
+
+    def save_agent(self, agent) -> bool:
+        """``agent.save(agent.npz)``; a failure is logged (the data are already safe)."""
+        try:
+            agent.save(self.agent_path)
+            return True
+        except Exception as err:  # noqa: BLE001 - keep running; data are on disk
+            logger.warning("could not save the agent to %s: %s", self.agent_path, err)
+            return False
+
+    def save_progress(self, progress: Dict[str, Any], summary: Dict[str, Any]) -> None:
+        """Write ``progress.json``, then ``summary.json``."""
+        write_json_atomic(self.progress_path, progress)
+        write_json_atomic(self.summary_path, summary)
+
+    # -- reading ------------------------------------------------------------------------
+    def load_progress(self) -> Dict[str, Any]:
+        """The contents of ``progress.json`` (``FileNotFoundError`` when there is none)."""
+        with open(self.progress_path, encoding="utf-8") as f:
+            return json.load(f)
+
+    def load_episodes(self, records: Sequence[Dict[str, Any]]
+                      ) -> Tuple[List[Episode], List[Dict[str, np.ndarray]]]:
+        """The episodes counted in ``records`` (from ``progress.json``) and their
+        predictions, read from ``data.npz``."""
+        episodes, predictions = [], []
+        with np.load(self.data_path) as data:
+            for i, record in enumerate(records, start=1):
+                missing = [k for k in ("states", "actions", "rewards", "distances")
+                           if f"{k}_{i}" not in data.files]
+                if missing:
+                    raise ValueError(f"{self.data_path} lacks episode {i} "
+                                     f"({', '.join(missing)}) that progress.json counts")
+                episodes.append(Episode(
+                    states=data[f"states_{i}"], actions=data[f"actions_{i}"],
+                    rewards=data[f"rewards_{i}"], distances=data[f"distances_{i}"],
+                    random=bool(record["random"])))
+                predictions.append({
+                    name: data[k] for k, (name, _, number) in
+                    ((k, k.rpartition("_")) for k in data.files)
+                    if number == str(i) and name.startswith(PREDICTION_PREFIXES)})
+        return episodes, predictions
+
+    def load_agent(self):
+        """The saved agent (``PILCO.load``), or None when there is none or it is unreadable."""
+        if not os.path.exists(self.agent_path):
+            return None
+        try:
+            from ..models import PILCO
+
+            agent = PILCO.load(self.agent_path)
+        except Exception as err:  # noqa: BLE001 - the caller rebuilds the agent
+            logger.warning("could not load the agent from %s (%s); rebuilding it",
+                           self.agent_path, err)
+            return None
+        logger.info("resumed the agent from %s", self.agent_path)
+        return agent

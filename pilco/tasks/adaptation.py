@@ -1,0 +1,156 @@
+"""Adaptation to damage: learn to reach on the healthy Fetch arm, then break a joint
+mid-run and keep learning with the same agent (the paper's motivation, §5.2).
+
+1. the random episodes and up to ``--healthy-episodes`` learned episodes on the healthy
+   arm, stopping as soon as an episode reaches the target;
+2. :func:`damage`: ``env.damage(--damaged-joints, --damage-mode)`` (the policy is not
+   told; by default the elbow is stuck at its angle, ``--damage-mode zero`` straightens
+   it); the damaged arm's start state becomes the agent's ``m_init``;
+3. up to ``--damaged-episodes`` learned episodes with the same agent, policy and data
+   (``--drop-old-data``: the model then learns from the damaged episodes only), stopping
+   once it reaches again (unless ``--no-stop-when-recovered``).
+
+The summary adds ``damage_at_episode`` (first episode on the damaged arm) and
+``episodes_to_recover`` (damaged episodes until one reaches, counting that one; null if
+none did). "Success": recovered within :data:`RECOVER_WITHIN` damaged episodes.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+from typing import Any, Dict, List, Optional, Sequence
+
+from ..experiment import Experiment
+from ..experiment.cli import configure_logging, finish, parse_args_with_resume
+from . import reacher
+
+__all__ = ["build_parser", "parse_args", "make_experiment", "damage", "run", "figures",
+           "main", "RECOVER_WITHIN"]
+
+#: success: the damaged arm reaches again within this many damaged episodes
+RECOVER_WITHIN = 3
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The reacher's flags plus the adaptation's."""
+    parser = reacher.build_parser(damaged=False)
+    parser.description = "PILCO on the Fetch reacher, adapting to a joint damaged mid-run"
+    # the elbow breaks where it is (stuck at its start angle), so the arm starts where the
+    # healthy one did and the healthy cost width still applies; --damage-mode zero
+    # straightens it (1.17 m from the target: add --cost-width 0.4 then)
+    parser.set_defaults(output="runs/adaptation-seed{seed}", episodes=None,
+                        damage_mode="stuck")
+    g = parser.add_argument_group("adaptation")
+    for name, text in (("--healthy-episodes", "at most this many learned episodes before "
+                                               "the damage"),
+                       ("--damaged-episodes", "at most this many learned episodes after it")):
+        g.add_argument(name, type=int, default=4, help=text)
+    for name, text in (("--drop-old-data", "after the damage, learn the model from damaged "
+                                           "episodes only"),
+                       ("--no-stop-when-recovered", "run all --damaged-episodes even after "
+                                                    "reaching again")):
+        g.add_argument(name, action="store_true", help=text)
+    return parser
+
+
+def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
+    args = parse_args_with_resume(build_parser(), argv)
+    configure_logging(args.log_level)
+    args.episodes = args.random_episodes + args.healthy_episodes + args.damaged_episodes
+    return args
+
+
+def recovered_within(episodes: int):
+    """``summary -> bool``: the damaged arm reached again within ``episodes`` episodes."""
+
+    def success(summary: Dict[str, Any]) -> bool:
+        recover = summary.get("episodes_to_recover")
+        return recover is not None and recover <= episodes
+
+    return success
+
+
+def make_experiment(args: argparse.Namespace) -> Experiment:
+    """The healthy reacher's run (new or resumed), with the adaptation's summary fields."""
+    exp = reacher.make_experiment(args, "adaptation", damaged=False,
+                                  success_fn=recovered_within(RECOVER_WITHIN))
+    exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None,
+                          **exp.summary_fields}
+    return exp
+
+
+def damage(exp: Experiment, args: argparse.Namespace) -> None:
+    """Break the arm's joints; the agent's ``m_init`` becomes the damaged start state."""
+    env = exp.make_env()
+    env.unwrapped.damage(tuple(args.damaged_joints), args.damage_mode)
+    obs, _ = env.reset(seed=exp.episode_seed(len(exp.episodes) + 1))
+    exp.agent.m_init = obs[None, :]  # the damaged arm may start elsewhere
+
+
+def _learned_solved(exp: Experiment) -> bool:
+    return any(not r["random"] and exp.episode_solved(e)
+               for r, e in zip(exp.records, exp.episodes))
+
+
+def run(exp: Experiment, args: argparse.Namespace) -> Dict[str, Any]:
+    """Healthy episodes until one reaches, the damage, damaged episodes until the arm
+    reaches again (or their budget is spent); resumable at any episode."""
+    fields = exp.summary_fields
+    exp.complete = False
+    with exp.session():
+        while len(exp.episodes) < args.random_episodes:
+            exp.run_random_episode()
+        if fields["damage_at_episode"] is None:
+            healthy = sum(not r["random"] for r in exp.records)
+            solved = _learned_solved(exp)
+            while healthy < args.healthy_episodes and not solved:
+                exp.run_learned_episode()
+                healthy += 1
+                solved = exp.episode_solved(exp.episodes[-1])
+            damage(exp, args)
+            fields["damage_at_episode"] = len(exp.episodes) + 1
+            if args.drop_old_data:
+                exp.train_from_episode = fields["damage_at_episode"]
+            exp.save_progress()
+        else:
+            damage(exp, args)  # resuming after the damage: break the fresh env again
+        first = fields["damage_at_episode"]
+        while len(exp.episodes) - first + 1 < args.damaged_episodes:
+            if fields["episodes_to_recover"] is not None and not args.no_stop_when_recovered:
+                break
+            exp.run_learned_episode()
+            if fields["episodes_to_recover"] is None and exp.episode_solved(exp.episodes[-1]):
+                fields["episodes_to_recover"] = len(exp.episodes) - first + 1
+            exp.save_progress()
+        exp.complete = True
+    return exp.summary()
+
+
+def figures(exp: Experiment, args: argparse.Namespace) -> List[str]:
+    """``adaptation_distance.png`` (healthy and damaged episodes) and the reacher's."""
+    from .. import plotting
+
+    first = exp.summary_fields["damage_at_episode"]
+    kinds = ["random" if e.random else "healthy" if i + 1 < first else "damaged"
+             for i, e in enumerate(exp.episodes)]
+    paths = [plotting.plot_distances(
+        [e.distances for e in exp.episodes],
+        os.path.join(exp.directory, "adaptation_distance.png"),
+        random=[e.random for e in exp.episodes], threshold=args.threshold,
+        ylabel="distance to target [m]",
+        labels=[f"episode {i + 1} ({k})" for i, k in enumerate(kinds)], marks=[first],
+        title=f"damage ({', '.join(args.damaged_joints)}, {args.damage_mode}) "
+              f"before episode {first}")]
+    return paths + reacher.figures(exp, title="adaptation")
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the task as ``examples/adaptation.py`` does; returns the exit status."""
+    args = parse_args(argv)
+    exp = make_experiment(args)
+    summary = run(exp, args)
+    return finish(exp, summary, args, title="Timing (adaptation)",
+                  notes=[f"\ndamage at episode {summary['damage_at_episode']}; episodes to "
+                         f"recover: {summary['episodes_to_recover']}"],
+                  figures=lambda: figures(exp, args))

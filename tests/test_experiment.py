@@ -1,0 +1,229 @@
+"""Unit tests of the experiment loop, in-process, with a tiny environment and a stand-in
+agent: what a run collects, saves and summarises, the model-refit rule, interrupts by
+Ctrl-C and SIGTERM, and resuming."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import gymnasium
+import numpy as np
+import pytest
+
+from pilco.experiment import Experiment, ExperimentConfig, RunStore, rollout
+from pilco.experiment import signals as run_signals
+
+
+class LineEnv(gymnasium.Env):
+    """A point on a line: ``x' = x + u``; the distance is ``|x - 1|``."""
+
+    def __init__(self):
+        self.observation_space = gymnasium.spaces.Box(-10, 10, (1,), np.float64)
+        self.action_space = gymnasium.spaces.Box(-0.5, 0.5, (1,), np.float64)
+        self.x = np.zeros(1)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x = np.array([0.01 * (seed or 0) % 0.1])
+        return self.x.copy(), {"distance": float(abs(self.x[0] - 1))}
+
+    def step(self, action):
+        self.x = self.x + np.clip(action, -0.5, 0.5)
+        d = float(abs(self.x[0] - 1))
+        return self.x.copy(), -d, d < 0.05, False, {"distance": d}
+
+
+class StandInAgent:
+    """Records what the loop asks of an agent; acts with a fixed gain towards 1."""
+
+    horizon = 5
+
+    def __init__(self, data, gain=0.6, interrupt_policy_at=None):
+        self.calls = []
+        self.data = data
+        self.gain = gain
+        self.interrupt_policy_at = interrupt_policy_at
+        self.m_init = np.zeros((1, 1))
+
+    def set_data(self, data):
+        self.data = (np.array(data[0]), np.array(data[1]))
+        self.calls.append(("set_data", len(data[0])))
+
+    def optimize_models(self, maxiter, restarts, seed, callback, min_rel_improvement, patience):
+        self.calls.append(("models", seed))
+        callback(0)
+
+    def optimize_policy(self, maxiter, restarts, seed, callback, method, min_rel_improvement,
+                        patience):
+        self.calls.append(("policy", seed, min_rel_improvement))
+        if self.interrupt_policy_at == len([c for c in self.calls if c[0] == "policy"]):
+            os.kill(os.getpid(), signal.SIGTERM)  # arrives mid-optimisation
+        callback(0)
+        return 1.0
+
+    def compute_action(self, x):
+        return np.array([[self.gain * (1.0 - float(np.ravel(x)[0]))]])
+
+    def predict_trajectory_with_rewards(self, horizon):
+        return (np.zeros((horizon + 1, 1)), np.ones((horizon + 1, 1, 1)),
+                np.zeros(horizon + 1), np.zeros(horizon + 1))
+
+    def save(self, path):
+        raise NotImplementedError("the stand-in agent is rebuilt on resume")
+
+
+def config(**kw):
+    base = dict(task="line", env_id="unused", seed=3, episodes=4, random_episodes=1, steps=6,
+                random_action_scale=0.1, predictions=False, quiet=True, render=False,
+                success_threshold=0.05)
+    base.update(kw)
+    return ExperimentConfig(**base)
+
+
+def experiment(tmp_path, cfg=None, agents=None, agent_kw=None, **kw):
+    agents = [] if agents is None else agents
+
+    def build(data, start_states):
+        assert start_states.shape[1] == 1 and len(start_states) >= cfg_.random_episodes
+        agents.append(StandInAgent(data, **(agent_kw or {})))
+        return agents[-1]
+
+    cfg_ = cfg or config()
+    return Experiment(cfg_, str(tmp_path / "run"), build, make_env=LineEnv, **kw), agents
+
+
+def test_a_run_collects_saves_and_summarises_every_episode(tmp_path):
+    exp, agents = experiment(tmp_path)
+    summary = exp.run()
+    agent = agents[0]
+    steps = [r["steps"] for r in summary["episodes"]]
+    # the agent was built once, after the random episode, and saw every transition
+    assert len(agents) == 1 and agent.data[0].shape == (sum(steps), 2)
+    assert [c for c in agent.calls if c[0] == "models"] == [("models", 3002), ("models", 3003),
+                                                            ("models", 3004)]
+    assert summary["complete"] is True and summary["seed"] == 3
+    assert [r["random"] for r in summary["episodes"]] == [True, False, False, False]
+    # the gain-0.6 policy reaches 5 cm of x = 1 in 4 steps (actions clipped to 0.5)
+    assert summary["solved"] and summary["solved_at_episode"] == 2 and summary["success"]
+    for record, distances in zip(summary["episodes"], summary["distances"]):
+        assert len(distances) == record["steps"] + 1
+        assert record["min_distance"] == pytest.approx(min(distances[1:]))
+    with np.load(exp.store.data_path) as data:
+        assert data["X"].shape == (sum(steps), 2)
+        np.testing.assert_array_equal(np.bincount(data["episode"])[1:], steps)
+        np.testing.assert_allclose(data["Y"][:, 0], np.concatenate(
+            [np.diff(data[f"states_{i}"][:, 0]) for i in range(1, 5)]))
+    progress = json.load(open(exp.store.progress_path))
+    assert progress["episodes_done"] == 4 and progress["complete"] is True
+    assert json.load(open(exp.store.summary_path)) == json.loads(json.dumps(summary))
+
+
+def test_an_unchanged_training_set_is_not_refitted(tmp_path):
+    exp, agents = experiment(tmp_path, config(max_data=4, episodes=5))
+    exp.run()
+    # 6 random transitions already exceed max_data=4: one fit, then the data never change
+    assert [c[0] for c in agents[0].calls].count("models") == 1
+    assert agents[0].data[0].shape == (4, 2)
+
+
+def test_training_from_a_later_episode_and_the_success_rule(tmp_path):
+    exp, agents = experiment(tmp_path, success_fn=lambda s: len(s["episodes"]) == 4)
+    exp.run_random_episode()
+    exp.run_learned_episode()
+    exp.train_from_episode = 2
+    X, _ = exp.training_data()
+    assert len(X) == exp.episodes[1].steps
+    exp.run_learned_episode()
+    assert exp.summary()["success"] is False
+    exp.run_learned_episode()
+    assert exp.summary()["success"] is True
+
+
+def test_ctrl_c_in_a_rollout_keeps_its_transitions_and_the_run_resumes(tmp_path):
+    exp, agents = experiment(tmp_path)
+    exp.run_random_episode()
+    agent = agents[0]
+    original = agent.compute_action
+    calls = {"n": 0}
+
+    def interrupting(x):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return original(x)
+
+    agent.compute_action = interrupting
+    summary = exp.run()
+    assert exp.interrupted and summary["complete"] is False and len(summary["episodes"]) == 1
+    with np.load(exp.store.data_path) as data:
+        assert data["partial_X"].shape == (2, 2)  # two complete steps of episode 2
+    agent.compute_action = original
+
+    resumed, new_agents = experiment(tmp_path)
+    resumed = Experiment.resume(exp.directory, config(), resumed.build_agent,
+                                make_env=LineEnv)
+    assert len(resumed.episodes) == 1 and resumed.agent is new_agents[0]
+    np.testing.assert_array_equal(resumed.episodes[0].states, exp.episodes[0].states)
+    final = resumed.run()
+    assert final["complete"] is True and len(final["episodes"]) == 4
+    assert final["episodes"][0] == summary["episodes"][0]
+
+
+def test_sigterm_stops_at_the_next_safe_point_and_saves(tmp_path):
+    exp, agents = experiment(tmp_path, agent_kw={"interrupt_policy_at": 2})
+    summary = exp.run()
+    assert exp.interrupted and not run_signals.stop_requested()
+    # the signal came during episode 3's policy optimisation: two episodes are kept
+    assert len(summary["episodes"]) == 2 and summary["complete"] is False
+    assert json.load(open(exp.store.progress_path))["interrupted"] is True
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+
+
+def test_resume_reads_progress_written_before_the_typed_fields(tmp_path):
+    exp, _ = experiment(tmp_path)
+    exp.run_random_episode()
+    exp.run_learned_episode()
+    progress = json.load(open(exp.store.progress_path))
+    progress.pop("train_from_episode")
+    progress.pop("summary_fields")
+    progress["extra"] = {"train_from_episode": 2, "summary": {"damage_at_episode": 2}}
+    open(exp.store.progress_path, "w").write(json.dumps(progress))
+    base, _ = experiment(tmp_path)
+    resumed = Experiment.resume(exp.directory, config(), base.build_agent, make_env=LineEnv)
+    assert resumed.train_from_episode == 2
+    assert resumed.summary()["damage_at_episode"] == 2
+
+
+def test_resume_refuses_progress_that_counts_missing_data(tmp_path):
+    exp, _ = experiment(tmp_path)
+    exp.run_random_episode()
+    progress = json.load(open(exp.store.progress_path))
+    progress["episodes_done"] = 2
+    progress["records"].append(dict(progress["records"][0], episode=2))
+    open(exp.store.progress_path, "w").write(json.dumps(progress))
+    with pytest.raises(ValueError, match="lacks episode 2"):
+        RunStore(exp.directory).load_episodes(progress["records"])
+
+
+def test_rollout_needs_a_policy_unless_random():
+    with pytest.raises(ValueError, match="needs a policy_fn"):
+        rollout(LineEnv(), None, 3)
+    ep = rollout(LineEnv(), lambda x: np.array([0.5]), 3, seed=0)
+    assert ep.steps == 2 and ep.terminated  # 0 -> 0.5 -> 1.0
+    X, Y = ep.transitions()
+    np.testing.assert_allclose(Y[:, 0], [0.5, 0.5])
+    np.testing.assert_allclose(X, [[0.0, 0.5], [0.5, 0.5]])
+
+
+def test_tasks_entry_point_lists_the_tasks():
+    out = subprocess.run([sys.executable, "-m", "pilco.tasks", "nonsense"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert "cartpole,reacher,damaged_reacher,adaptation" in out.stderr
+    from pilco.tasks import task_main
+
+    with pytest.raises(ValueError, match="unknown task 'nonsense'"):
+        task_main("nonsense")
