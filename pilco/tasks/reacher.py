@@ -81,6 +81,9 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                    help="damaged arm: elbow forced to 0 rad ('zero', the paper) or stuck")
     g.add_argument("--damaged-joints", nargs="+", default=["elbow_flex"],
                    help="damaged arm: joints that ignore commands")
+    g.add_argument("--constant-input-lengthscale", type=float, default=100.0,
+                   help="lengthscale given to GP inputs that are constant in the data (a "
+                        "damaged joint) after every model fit; 0: leave them to training")
     g.add_argument("--render-size", type=int, nargs=2, default=[320, 240],
                    metavar=("W", "H"), help="frame size of the rendered final episode")
     return parser
@@ -152,10 +155,22 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray):
             reward = CombinedRewards(D, [reward, position_reward(D, args.fine_cost_width)])
         agent = PILCO(data, controller, reward, horizon=args.horizon,
                       m_init=start_states[0:1], S_init=args.start_var * np.eye(D))
-        ignore_constant_inputs(agent)
+        after_model_fit(args)(agent)
         return agent
 
     return build
+
+
+def after_model_fit(args: argparse.Namespace):
+    """``agent -> None`` run after building the agent and every model fit:
+    :func:`ignore_constant_inputs` unless ``--constant-input-lengthscale 0``."""
+    ell = args.constant_input_lengthscale
+
+    def adjust(agent) -> None:
+        if ell:
+            ignore_constant_inputs(agent, ell)
+
+    return adjust
 
 
 def reached_within(steps: int):
@@ -185,7 +200,7 @@ def make_experiment(args: argparse.Namespace, task: str = "reacher",
                                             *args.render_size)
 
     kw = dict(make_env=lambda: env, args=vars(args), render_fn=render,
-              after_model_fit=ignore_constant_inputs,
+              after_model_fit=after_model_fit(args),
               success_fn=success_fn or reached_within(SUCCESS_STEPS))
     build = agent_builder(args, target)
     if args.resume:
