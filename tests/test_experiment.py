@@ -227,3 +227,51 @@ def test_tasks_entry_point_lists_the_tasks():
 
     with pytest.raises(ValueError, match="unknown task 'nonsense'"):
         task_main("nonsense")
+
+
+def test_the_first_policy_optimisation_can_have_its_own_budget(tmp_path):
+    exp, agents = experiment(tmp_path, config(policy_iters=7, policy_iters_first=60))
+    seen = []
+    exp.run_random_episode()
+    agent = agents[0]
+    original = agent.optimize_policy
+
+    def recording(maxiter, **kw):
+        seen.append(maxiter)
+        return original(maxiter, **kw)
+
+    agent.optimize_policy = recording
+    exp.run_learned_episode()
+    exp.run_learned_episode()
+    assert seen == [60, 7]
+    with pytest.raises(ValueError, match="policy_iters_first must be a whole number"):
+        config(policy_iters_first=0)
+    with pytest.raises(ValueError, match="episodes must be a whole number >= 1"):
+        config(episodes=0)
+
+
+def test_presets_sit_between_the_defaults_and_the_flags_given(tmp_path):
+    import argparse
+
+    from pilco.experiment.cli import (add_common_arguments, add_preset_argument,
+                                      parse_args_with_resume)
+
+    def parser():
+        p = argparse.ArgumentParser()
+        add_common_arguments(p, episodes=4, steps=50, basis_functions=50, policy_iters=25,
+                             model_iters=100, output=str(tmp_path / "run-{seed}"))
+        add_preset_argument(p, {"wide": {"policy_iters": 30, "horizon": 100}})
+        return p
+
+    assert parse_args_with_resume(parser(), []).policy_iters == 25
+    args = parse_args_with_resume(parser(), ["--preset", "wide", "--horizon", "20"])
+    assert (args.policy_iters, args.horizon, args.preset) == (30, 20, "wide")
+    assert "_presets" not in vars(args)
+    # a resumed run keeps its preset and settings; flags given again still win
+    run = tmp_path / "run-0"
+    run.mkdir()
+    (run / "progress.json").write_text(json.dumps({"args": vars(args)}))
+    resumed = parse_args_with_resume(parser(), ["--resume", str(run), "--episodes", "6"])
+    assert (resumed.policy_iters, resumed.horizon, resumed.episodes) == (30, 20, 6)
+    with pytest.raises(ValueError, match="sets unknown flags"):
+        add_preset_argument(argparse.ArgumentParser(), {"bad": {"nope": 1}})

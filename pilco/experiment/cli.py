@@ -10,7 +10,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from .report import format_episode_table, format_timing_table
 
-__all__ = ["add_common_arguments", "learning_settings", "parse_args_with_resume",
+__all__ = ["add_common_arguments", "add_preset_argument", "learning_settings",
+           "parse_args_with_resume",
            "configure_logging", "finish"]
 
 
@@ -46,6 +47,8 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
             ("--policy-iters", policy_iters, "optimiser iterations per policy optimisation"),
             ("--policy-restarts", policy_restarts, "policy optimisation restarts"),
             ("--policy-patience", 10, "iterations for --policy-min-rel-improvement"),
+            ("--policy-iters-first", None, "iterations of the first policy optimisation "
+                                           "(None: --policy-iters)"),
             ("--model-iters", model_iters, "L-BFGS iterations of GP training"),
             ("--model-restarts", model_restarts, "GP training restarts"),
             ("--max-data", max_data,
@@ -82,23 +85,52 @@ def learning_settings(args: argparse.Namespace) -> Dict[str, Any]:
         policy_method=args.policy_optimizer,
         policy_min_rel_improvement=args.policy_min_rel_improvement,
         policy_patience=args.policy_patience, policy_early_stop=args.policy_early_stop,
+        policy_iters_first=args.policy_iters_first,
     )
+
+
+def add_preset_argument(parser: argparse.ArgumentParser,
+                        presets: Dict[str, Dict[str, Any]]) -> None:
+    """``--preset NAME``: a named set of defaults (``{flag dest: value}``); flags given
+    on the command line still win. Unknown keys in a preset are a programming error."""
+    known = {a.dest for a in parser._actions}  # noqa: SLF001 - argparse has no API
+    for name, values in presets.items():
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"preset {name!r} sets unknown flags {unknown}")
+    parser.add_argument("--preset", choices=sorted(presets), default=None,
+                        help="start from a named set of settings; flags given still win: "
+                             + "; ".join(f"{k}: {_describe(v)}" for k, v in presets.items()))
+    parser.set_defaults(_presets=presets)
+
+
+def _describe(values: Dict[str, Any]) -> str:
+    return " ".join(f"--{k.replace('_', '-')} {v}" for k, v in values.items())
 
 
 def parse_args_with_resume(parser: argparse.ArgumentParser,
                            argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
-    """Parse ``argv``; with ``--resume DIR`` the settings saved in ``DIR/progress.json``
-    become the defaults, so only flags given again (e.g. ``--episodes``) change."""
+    """Parse ``argv``. Precedence, lowest first: the task's defaults, ``--preset``'s
+    values, the settings saved in ``DIR/progress.json`` with ``--resume DIR``, the flags
+    given (so only flags given again, e.g. ``--episodes``, change a resumed run)."""
     args = parser.parse_args(argv)
+    presets = getattr(args, "_presets", {})
+    saved: Dict[str, Any] = {}
     if args.resume:
         path = os.path.join(args.resume, "progress.json")
         if not os.path.exists(path):
             parser.error(f"--resume {args.resume}: no progress.json there")
         with open(path, encoding="utf-8") as f:
             saved = json.load(f).get("args", {})
+    preset = args.preset if getattr(args, "preset", None) else saved.get("preset")
+    if preset or saved:
         known = {a.dest for a in parser._actions}  # noqa: SLF001 - argparse has no API
+        parser.set_defaults(**presets.get(preset, {}))
         parser.set_defaults(**{k: v for k, v in saved.items() if k in known})
         args = parser.parse_args(argv)
+    if hasattr(args, "_presets"):
+        del args._presets
+    if args.resume:
         args.output = args.resume
     else:
         args.output = args.output.format(seed=args.seed)

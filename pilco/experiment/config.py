@@ -28,6 +28,8 @@ class ExperimentConfig:
             (``None``: always ``model_iters``).
         policy_iters, policy_restarts: the same for the policy.
         policy_method: ``"L-BFGS-B"`` or ``"BFGS"`` (see ``PILCO.optimize_policy``).
+        policy_iters_first: iterations of the first policy optimisation (``None``: as
+            ``policy_iters``; the paper's code ran its 30 twice the first time).
         policy_min_rel_improvement, policy_patience: stop a policy optimisation run when its
             predicted return grew by less than ``policy_min_rel_improvement`` (relative)
             over the last ``policy_patience`` iterations (``None``: always ``policy_iters``).
@@ -65,6 +67,7 @@ class ExperimentConfig:
     policy_method: str = "L-BFGS-B"
     policy_min_rel_improvement: Optional[float] = None
     policy_patience: int = 10
+    policy_iters_first: Optional[int] = None
     policy_early_stop: str = "always"
     cost_width: float = 0.25
     success_threshold: float = 0.05
@@ -76,6 +79,15 @@ class ExperimentConfig:
     quiet: bool = False
 
     def __post_init__(self):
+        for name in ("episodes", "steps", "model_iters", "policy_iters", "model_restarts",
+                     "policy_restarts", "policy_patience", "hold_steps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
+        if self.policy_iters_first is not None and (
+                not isinstance(self.policy_iters_first, int) or self.policy_iters_first < 1):
+            raise ValueError(f"policy_iters_first must be a whole number >= 1 or None, got "
+                             f"{self.policy_iters_first!r}")
         if self.policy_early_stop not in ("always", "solved"):
             raise ValueError(f"policy_early_stop must be 'always' or 'solved', got "
                              f"{self.policy_early_stop!r}")

@@ -43,11 +43,13 @@ def improve_policy(exp, number: int) -> float:
     or, with ``policy_early_stop="solved"``, once an episode was solved. Returns the
     predicted return."""
     cfg, agent = exp.config, exp.agent
+    first = number == cfg.random_episodes + 1
+    iters = cfg.policy_iters_first if first and cfg.policy_iters_first else cfg.policy_iters
     early_stop = cfg.policy_early_stop == "always" or exp.solved_at_episode() is not None
-    with progress_bar(cfg.policy_iters * cfg.policy_restarts, f"episode {number} policy",
+    with progress_bar(iters * cfg.policy_restarts, f"episode {number} policy",
                       cfg.quiet) as bar:
         expected = agent.optimize_policy(
-            maxiter=cfg.policy_iters, restarts=cfg.policy_restarts,
+            maxiter=iters, restarts=cfg.policy_restarts,
             seed=exp.episode_seed(number), callback=optimizer_callback(bar),
             method=cfg.policy_method,
             min_rel_improvement=cfg.policy_min_rel_improvement if early_stop else None,

@@ -63,6 +63,8 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
     g.add_argument("--fine-cost-width", type=float, default=None,
                    help="add a second, narrow saturating cost of this width [m] (more "
                         "precision near the target); default: none")
+    g.add_argument("--planning-horizon", type=int, default=None,
+                   help="steps the policy is optimised over (default: --horizon)")
     g.add_argument("--start-var", type=float, default=1e-4,
                    help="variance of the initial state distribution (times the identity)")
     g.add_argument("--random-action", type=float, default=0.05,
@@ -153,7 +155,7 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray):
         reward = position_reward(D, args.cost_width)
         if args.fine_cost_width:
             reward = CombinedRewards(D, [reward, position_reward(D, args.fine_cost_width)])
-        agent = PILCO(data, controller, reward, horizon=args.horizon,
+        agent = PILCO(data, controller, reward, horizon=args.planning_horizon or args.horizon,
                       m_init=start_states[0:1], S_init=args.start_var * np.eye(D))
         after_model_fit(args)(agent)
         return agent
