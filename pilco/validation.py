@@ -1,17 +1,21 @@
 """Checks at the public API boundary: bad input is reported before TensorFlow sees it.
 
 Every check raises :class:`ValueError` (wrong values or shapes) or :class:`TypeError`
-(wrong kinds of object) whose message names the argument and the problem.
+(wrong kinds of object) whose message names the argument and the problem. All argument
+checks of the package live here.
+
+This module imports only NumPy and the standard library at import time (the NumPy-only
+:mod:`pilco.deploy` uses it); TensorFlow is imported by the checks that return tensors.
 """
 from __future__ import annotations
 
 import numbers
 from collections.abc import Iterable
-from typing import Optional, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
-import tensorflow as tf
-from gpflow.config import default_float
+
+from .protocols import Controller, Reward
 
 __all__ = [
     "as_2d_float",
@@ -24,14 +28,21 @@ __all__ = [
     "check_seed",
     "check_bool",
     "check_indices",
+    "check_choice",
+    "check_matrix",
+    "check_states",
+    "check_ratio_bound",
+    "check_squash",
+    "check_reward",
+    "check_controller",
 ]
 
 
 def _to_numpy(x, name: str) -> np.ndarray:
     if isinstance(x, (str, bytes)) or x is None:
         raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
-    if tf.is_tensor(x) or isinstance(x, tf.Variable):
-        x = x.numpy() if hasattr(x, "numpy") else tf.convert_to_tensor(x).numpy()
+    if callable(getattr(x, "numpy", None)):  # TensorFlow tensors, variables, parameters
+        x = x.numpy()
     try:
         raw = np.asarray(x)
     except (TypeError, ValueError) as err:  # e.g. ragged nested lists
@@ -126,6 +137,9 @@ def check_gaussian(m, s, dim: int, name: str = "state"):
         raise ValueError(f"{name} mean must have shape (1, {dim}), got {m.shape}")
     _check_finite(m, f"{name} mean")
     s = check_covariance(s, dim, f"{name} covariance")
+    import tensorflow as tf  # only here: the NumPy checks must not load TensorFlow
+    from gpflow.config import default_float
+
     f = default_float()
     m_out = (tf.reshape(tf.cast(m_in, f), (1, dim)) if tf.is_tensor(m_in)
              else tf.convert_to_tensor(m, dtype=f))
@@ -215,3 +229,103 @@ def check_max_action(max_action, control_dim: int) -> np.ndarray:
     if np.any(arr <= 0):
         raise ValueError(f"max_action must be positive, got {arr}")
     return arr
+
+
+def check_choice(value, choices: Sequence[str], name: str) -> str:
+    """One of the strings ``choices`` (compared in upper case), or a clear error."""
+    if not isinstance(value, str) or value.upper() not in choices:
+        raise ValueError(f"{name} must be one of {tuple(choices)}, got {value!r}")
+    return value.upper()
+
+
+def check_matrix(value, shape: Tuple[int, ...], name: str) -> np.ndarray:
+    """A finite float64 array of exactly ``shape``, or a clear error."""
+    arr = _to_numpy(value, name)
+    if arr.shape != tuple(shape):
+        raise ValueError(f"{name} must have shape {tuple(shape)}, got {arr.shape}")
+    _check_finite(arr, name)
+    return arr
+
+
+def check_states(state, dim: int, name: str = "state") -> np.ndarray:
+    """One measured state [dim] or a batch [N, dim] of finite numbers, as float64."""
+    if isinstance(state, (str, bytes)) or state is None:
+        raise TypeError(f"{name} must be an array of numbers, got {type(state).__name__}")
+    try:
+        x = np.asarray(state, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be an array of numbers: {err}") from None
+    if x.ndim not in (1, 2):
+        raise ValueError(f"{name} must have shape [{dim}] or [N, {dim}], got {x.shape}")
+    if x.shape[-1] != dim:
+        raise ValueError(f"{name} must have {dim} entries per row (the policy's state "
+                         f"dimension), got shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(x))[0])
+        raise ValueError(f"{name} contains NaN or inf (first at index {bad})")
+    return x
+
+
+def check_ratio_bound(value, name: str) -> float:
+    """A finite number > 1 (a bound on a ratio, such as a signal-to-noise ratio)."""
+    if not check_positive_float(value, name) > 1:
+        raise ValueError(f"{name} must be a finite number > 1, got {value}")
+    return float(value)
+
+
+def check_squash(squash):
+    """A squashing function ``(m, s, max_action) -> (M, S, C)`` or None, or a clear error."""
+    if squash is not None and not callable(squash):
+        raise TypeError(
+            f"squash must be a function such as squash_sin or squash_sat (or None), got "
+            f"{squash!r}"
+        )
+    return squash
+
+
+def _missing(obj, members: Sequence[str]) -> list:
+    return [name for name in members if not callable(getattr(obj, name, None))]
+
+
+def check_reward(reward, state_dim: Optional[int] = None, name: str = "reward"):
+    """An object following :class:`pilco.protocols.Reward` (with ``state_dim`` if given)."""
+    if (getattr(reward, "state_dim", None) is None or _missing(reward, ["moments"])
+            or not isinstance(reward, Reward)):
+        raise TypeError(
+            f"{name} must be a reward (such as ExponentialReward) following "
+            f"pilco.protocols.Reward: a state_dim attribute and a method moments(m, s), got "
+            f"{type(reward).__name__}"
+        )
+    if state_dim is not None and reward.state_dim != state_dim:
+        raise ValueError(f"{name}.state_dim is {reward.state_dim} but the state has "
+                         f"dimension {state_dim}")
+    return reward
+
+
+def check_controller(controller, feature_dim: int, control_dim: int, state_dim: int):
+    """An object following :class:`pilco.protocols.Controller` that reads ``feature_dim``
+    inputs (``state_dim`` plus one per angle) and returns ``control_dim`` actions."""
+    if getattr(controller, "state_dim", None) is None:
+        raise TypeError("controller must have a state_dim attribute (see "
+                        "pilco.protocols.Controller)")
+    missing = _missing(controller, ["prepare", "moments"])
+    if not hasattr(controller, "trainable_variables"):
+        missing.append("trainable_variables")
+    if missing or not isinstance(controller, Controller):
+        raise TypeError(
+            f"controller must follow pilco.protocols.Controller (state_dim, control_dim, "
+            f"trainable_variables, prepare() and moments(m, s, squash, prepared)); "
+            f"{type(controller).__name__} lacks {', '.join(missing) or 'control_dim'}"
+        )
+    if controller.state_dim != feature_dim:
+        raise ValueError(
+            f"controller.state_dim is {controller.state_dim} but the policy input has "
+            f"dimension {feature_dim} (state {state_dim} + one extra per angle in "
+            f"angle_indices)"
+        )
+    if getattr(controller, "control_dim", None) != control_dim:
+        raise ValueError(
+            f"controller.control_dim is {getattr(controller, 'control_dim', None)} but the "
+            f"data has {control_dim} action columns"
+        )
+    return controller
