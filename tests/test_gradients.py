@@ -87,7 +87,7 @@ def test_policy_objective_gradient_matches_finite_differences(kind, squash, angl
     F = 2 + len(angles)
     ctrl = make_controller(kind, squash, F)
     p = toy_pilco(ctrl, angles)
-    p._refresh_dynamics()
+    p.expected_return()  # factorises the dynamics model for _policy_loss
     variables = p.controller.trainable_variables
     expected = {"rbf": 5 * F + 5 + F, "linear": F + 1}[kind]  # centers, targets, ell / W, b
     assert sum(int(np.prod(v.shape)) for v in variables) == expected

@@ -37,6 +37,7 @@ from ..validation import (
     check_min_rel_improvement,
     check_positive_float,
     check_positive_int,
+    check_ratio_bound,
     check_seed,
 )
 
@@ -56,11 +57,9 @@ class MGPR(gpflow.base.Module):
     def __init__(self, data, noise_floor: float = 1e-6, max_snr: float = 500.0,
                  max_lengthscale_ratio: float = 100.0, name: Optional[str] = None):
         super().__init__(name=name)
-        for label, v in (("max_snr", max_snr), ("max_lengthscale_ratio", max_lengthscale_ratio)):
-            if not check_positive_float(v, label) > 1:
-                raise ValueError(f"{label} must be a finite number > 1, got {v}")
-        self.max_snr = float(max_snr)
-        self.max_lengthscale_ratio = float(max_lengthscale_ratio)
+        self.max_snr = check_ratio_bound(max_snr, "max_snr")
+        self.max_lengthscale_ratio = check_ratio_bound(max_lengthscale_ratio,
+                                                       "max_lengthscale_ratio")
         X, Y = check_data(data, "data")
         self.noise_floor = check_positive_float(noise_floor, "noise_floor")
         self.num_outputs = Y.shape[1]
