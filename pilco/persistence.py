@@ -20,16 +20,12 @@ These functions are the same as the agent's ``save``, ``PILCO.load`` and
 """
 from __future__ import annotations
 
-import logging
-
 from .controllers import LinearController, RbfController
-from .files import write_npz_atomic
+from .models import storage
 from .models.pilco import PILCO
-from .models.storage import AGENT_FORMAT, POLICY_FORMAT, policy_arrays
+from .models.storage import AGENT_FORMAT, POLICY_FORMAT
 
 __all__ = ["save_agent", "load_agent", "export_policy", "AGENT_FORMAT", "POLICY_FORMAT"]
-
-logger = logging.getLogger(__name__)
 
 
 def save_agent(agent: PILCO, path) -> str:
@@ -66,6 +62,4 @@ def export_policy(agent, path) -> str:
     if type(agent) not in (RbfController, LinearController):
         raise TypeError(f"export_policy expects a PILCO agent or a controller, got "
                         f"{type(agent).__name__}")
-    written = write_npz_atomic(path, policy_arrays(agent, agent.state_dim, []))
-    logger.info("exported %s policy to %s", type(agent).__name__, written)
-    return written
+    return storage.export_policy(agent, path, agent.state_dim, [])

@@ -20,6 +20,9 @@ from .protocols import Controller, Reward
 __all__ = [
     "as_2d_float",
     "check_data",
+    "check_transitions",
+    "check_columns",
+    "check_state_row",
     "check_gaussian",
     "check_covariance",
     "check_positive_int",
@@ -99,6 +102,35 @@ def check_data(data, name: str = "data", x_dim: Optional[int] = None,
     if y_dim is not None and Y.shape[1] != y_dim:
         raise ValueError(f"{name} Y must have {y_dim} columns, got {Y.shape[1]}")
     return X, Y
+
+
+def check_transitions(data, name: str = "data") -> Tuple[np.ndarray, np.ndarray]:
+    """Raw transitions ``(X [N, D + U], Y [N, D])`` with at least one action column."""
+    X, Y = check_data(data, name)
+    if X.shape[1] <= Y.shape[1]:
+        raise ValueError(
+            f"{name} X must hold [state, action] with {Y.shape[1]} state columns (from Y) and "
+            f"at least one action column, got {X.shape[1]} columns"
+        )
+    return X, Y
+
+
+def check_columns(x, columns: int, name: str, meaning: str = "") -> np.ndarray:
+    """A finite float64 matrix [N, columns], or a clear error."""
+    arr = as_2d_float(x, name)
+    if arr.shape[1] != columns:
+        raise ValueError(f"{name} must have {columns} columns{' ' + meaning if meaning else ''}, "
+                         f"got {arr.shape[1]}")
+    return arr
+
+
+def check_state_row(x, dim: int, name: str = "state") -> np.ndarray:
+    """One measured state [dim] or [1, dim] of finite numbers, as float64 [1, dim]."""
+    x = _to_numpy(x, name)
+    x = as_2d_float(x.reshape(1, -1) if x.ndim == 1 else x, name)
+    if x.shape != (1, dim):
+        raise ValueError(f"{name} must have shape (1, {dim}), got {x.shape}")
+    return x
 
 
 def check_covariance(s, dim: int, name: str) -> np.ndarray:

@@ -15,31 +15,28 @@ from typing import Callable, Optional, Sequence
 import gpflow
 import numpy as np
 import tensorflow as tf
-from gpflow.config import default_float
 
-from ..angles import augment_state
-from ..features import angle_features
-from ..files import write_npz_atomic
 from ..validation import (
-    _to_numpy,
-    as_2d_float,
     check_bool,
+    check_columns,
     check_choice,
     check_controller,
     check_covariance,
-    check_data,
+    check_transitions,
     check_gaussian,
     check_indices,
     check_min_rel_improvement,
     check_positive_int,
     check_reward,
     check_seed,
+    check_state_row,
 )
 from . import storage
 from .mgpr import MGPR
 from .policy_search import GuardedScipy, search_policy
 from .rollout import Rollout
 from .smgpr import SMGPR
+from .transitions import Transitions
 
 __all__ = ["PILCO", "POLICY_METHODS"]
 
@@ -73,20 +70,14 @@ class PILCO(gpflow.base.Module):
             (``noise_floor``, ``max_snr``, ``max_lengthscale_ratio``).
     """
 
-
     def __init__(self, data, controller, reward, horizon: int = 30, m_init=None, S_init=None,
                  angle_indices: Sequence[int] = (), num_induced_points: Optional[int] = None,
                  policy_input_noise: bool = False, model_options: Optional[dict] = None,
                  name: Optional[str] = None):
         super().__init__(name=name)
-        X, Y = check_data(data, "data")
+        X, Y = check_transitions(data, "data")
         self.state_dim = D = Y.shape[1]
         self.control_dim = U = X.shape[1] - D
-        if U < 1:
-            raise ValueError(
-                f"data X must hold [state, action] with {D} state columns (from Y) and at "
-                f"least one action column, got {X.shape[1]} columns"
-            )
         self.angle_indices = check_indices(angle_indices, D, "angle_indices")
         self.feature_dim = D + len(self.angle_indices)
         check_controller(controller, self.feature_dim, U, D)
@@ -95,7 +86,7 @@ class PILCO(gpflow.base.Module):
         self._horizon = tf.Variable(check_positive_int(horizon, "horizon"), trainable=False,
                                     dtype=tf.int32, name="horizon")
         self.num_induced_points = num_induced_points
-        self._raw_X, self._raw_Y = X, Y
+        self._transitions = Transitions(X, Y, D, self.angle_indices)
         gp_data = (self.gp_inputs(X), Y)
         options = dict(model_options or {})
         if num_induced_points is None:
@@ -158,25 +149,28 @@ class PILCO(gpflow.base.Module):
         self._S_init.assign(check_covariance(value, self.state_dim, "initial state covariance"))
 
     @property
+    def mgpr(self) -> MGPR:
+        """The dynamics model (GP inputs [N, F + U] -> state differences [N, D])."""
+        return self._mgpr
+
+    @mgpr.setter
+    def mgpr(self, model: MGPR):
+        self._transitions.attach(model)  # checks (or, without angles, adopts) its data
+        self._mgpr = model
+
+    @property
     def data(self):
         """Raw transitions ``(X [N, D + U], Y [N, D])`` as NumPy arrays (copies)."""
-        return self._raw_X.copy(), self._raw_Y.copy()
+        return self._transitions.data
 
     # -- data -------------------------------------------------------------------------------
     def gp_inputs(self, X) -> np.ndarray:
         """Raw ``[x, u]`` rows [N, D + U] -> GP inputs [N, F + U] (angles as sin, cos)."""
-        X = np.asarray(X, dtype=np.float64)
-        if not self.angle_indices:
-            return X
-        D = self.state_dim
-        return np.concatenate([angle_features(X[:, :D], self.angle_indices), X[:, D:]], axis=1)
+        return self._transitions.gp_inputs(X)
 
     def set_data(self, data):
         """Replace the transitions ``(X [N, D + U], Y [N, D])`` the dynamics model learns from."""
-        X, Y = check_data(data, "data", x_dim=self.state_dim + self.control_dim,
-                          y_dim=self.state_dim)
-        self._raw_X, self._raw_Y = X, Y
-        self.mgpr.set_data((self.gp_inputs(X), Y))
+        self._transitions.replace(self.mgpr, data)
 
     def one_step_prediction(self, X):
         """Predicted state differences ``x_{t+1} - x_t`` at raw transition inputs.
@@ -184,10 +178,7 @@ class PILCO(gpflow.base.Module):
         Shapes: X [N, D + U] (raw states, angles as angles, then actions) -> mean [N, D],
         variance [N, D] (NumPy), the GP's latent variance plus its noise variance.
         """
-        X = as_2d_float(X, "X")
-        if X.shape[1] != self.state_dim + self.control_dim:
-            raise ValueError(f"X must have {self.state_dim + self.control_dim} columns "
-                             f"(state, then action), got {X.shape[1]}")
+        X = check_columns(X, self.state_dim + self.control_dim, "X", "(state, then action)")
         mean, var = self.mgpr.predict_f(self.gp_inputs(X))
         return np.asarray(mean), np.asarray(var) + np.asarray(self.mgpr.noise_variance)
 
@@ -262,24 +253,17 @@ class PILCO(gpflow.base.Module):
                         callback: Optional[Callable[[int], None]] = None,
                         method: str = "L-BFGS-B", min_rel_improvement: Optional[float] = None,
                         patience: int = 10):
-        """Maximise the predicted total reward over the policy parameters (L-BFGS-B or BFGS).
-
-        The first run starts from the current policy, each further restart from a random
-        one (``controller.randomize``). The best policy evaluated by any run is kept (never
-        one worse than the starting policy, which is the first point evaluated); a run that
-        fails numerically is logged and the best policy so far restored. Returns the best
-        total reward.
-
-        The objective and its gradient are one compiled function (the whole horizon
-        in-graph), traced on the first call and reused by later calls and restarts.
-        ``callback(iteration)`` is called after every L-BFGS iteration (progress bars;
-        an exception it raises, e.g. ``KeyboardInterrupt``, stops the optimisation).
+        """Maximise the predicted total reward over the policy parameters; returns the best
+        total reward. The best policy evaluated by any run is kept (see
+        :func:`pilco.models.policy_search.search_policy` for restarts, failures and
+        interruptions).
 
         ``method`` is ``"L-BFGS-B"`` or ``"BFGS"`` (a dense inverse-Hessian update, what
-        the MATLAB release's ``minimize`` uses for up to 1000 parameters). With
-        ``min_rel_improvement`` set, a run stops once its best expected return has grown by
-        less than ``min_rel_improvement * max(1, |return|)`` over the last ``patience``
-        iterations (a converged run then costs a few iterations instead of ``maxiter``).
+        the MATLAB release's ``minimize`` uses for up to 1000 parameters).
+        ``callback(iteration)`` is called after every iteration (an exception it raises
+        stops the optimisation). With ``min_rel_improvement`` set, a run stops once its best
+        expected return has grown by less than ``min_rel_improvement * max(1, |return|)``
+        over the last ``patience`` iterations.
         """
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
@@ -296,44 +280,23 @@ class PILCO(gpflow.base.Module):
                              patience)
 
     # -- acting -----------------------------------------------------------------------------
-    @tf.function(autograph=False)
-    def _act(self, x):
-        f = default_float()
-        Mf, _, _ = augment_state(x, tf.zeros([self.state_dim, self.state_dim], f),
-                                 self.angle_indices)
-        F = self.feature_dim
-        M, _, _ = self.controller.moments(Mf, tf.zeros([F, F], f), True)
-        return M
-
     def compute_action(self, x) -> np.ndarray:
         """The policy's action at a measured state: x [1, D] (or [D]) -> u [1, U]."""
-        x = _to_numpy(x, "state")
-        x = as_2d_float(x.reshape(1, -1) if x.ndim == 1 else x, "state")
-        if x.shape != (1, self.state_dim):
-            raise ValueError(f"state must have shape (1, {self.state_dim}), got {x.shape}")
-        return self._act(tf.convert_to_tensor(x)).numpy()
+        x = check_state_row(x, self.state_dim, "state")
+        return self._rollout.action(tf.convert_to_tensor(x)).numpy()
 
     # -- files ------------------------------------------------------------------------------
     def save(self, path) -> str:
         """Write everything needed to continue learning to ``path`` (atomically); returns
         the absolute path written. Layout: :func:`pilco.models.storage.agent_arrays`."""
-        written = write_npz_atomic(path, storage.agent_arrays(self))
-        logger.info("saved PILCO agent (%d transitions) to %s", len(self._raw_X), written)
-        return written
+        return storage.save_agent(self, path)
 
     @classmethod
     def load(cls, path) -> "PILCO":
         """Rebuild an agent written by :meth:`save`; it predicts and acts identically."""
-        kwargs, restore_dynamics = storage.read_agent(path)
-        agent = cls(**kwargs)
-        restore_dynamics(agent.mgpr)
-        logger.info("loaded PILCO agent from %s", path)
-        return agent
+        return storage.load_agent(cls, path)
 
     def export_policy(self, path) -> str:
         """Write the trained policy to a small ``.npz`` for :func:`pilco.deploy.load_policy`;
         returns the absolute path written."""
-        arrays = storage.policy_arrays(self.controller, self.state_dim, self.angle_indices)
-        written = write_npz_atomic(path, arrays)
-        logger.info("exported the policy to %s", written)
-        return written
+        return storage.export_policy(self.controller, path, self.state_dim, self.angle_indices)

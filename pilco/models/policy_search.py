@@ -86,7 +86,11 @@ def search_policy(loss: Callable[[], tf.Tensor], controller, optimizer: GuardedS
 
     The first run starts from the current policy, each further restart from
     ``controller.randomize(seed=...)``. The best policy evaluated by any run is left in
-    place (the start if no point was finite). Arguments are checked by the caller.
+    place: never one worse than the starting policy, which is the first point evaluated
+    (the start is kept if no point was finite). A run that fails numerically is logged and
+    the next one goes on; an interruption (Ctrl-C, an exception of ``callback``) leaves the
+    best policy so far in place and propagates. ``loss`` is compiled once by the optimiser
+    and reused by every run and later calls. Arguments are checked by the caller.
     Returns ``-best loss``, the best total reward.
     """
     variables = controller.trainable_variables

@@ -157,3 +157,13 @@ class Rollout(gpflow.base.Module):
                               tf.TensorShape([D, D])) + tuple(tf.TensorShape(None) for _ in arrays),
         )
         return tuple(a.stack() for a in out[3:])
+
+    @tf.function(autograph=False)
+    def action(self, x):
+        """The policy's action at a known state (zero covariance): x [1, D] -> u [1, U]."""
+        f = default_float()
+        D = self.state_dim
+        Mf, _, _ = augment_state(x, tf.zeros([D, D], f), self.angle_indices)
+        F = D + len(self.angle_indices)
+        M, _, _ = self.controller.moments(Mf, tf.zeros([F, F], f), True)
+        return M

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import logging
 import os
 from typing import Any, Dict, List, Sequence, Tuple
 
@@ -23,12 +24,15 @@ import numpy as np
 from .. import __version__, moments
 from ..controllers import LinearController, RbfController, squash_sat, squash_sin
 from ..deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
+from ..files import write_npz_atomic
 from ..rewards import CartPoleReward, CombinedRewards, ExponentialReward, LinearReward
 from .mgpr import MGPR
 from .smgpr import SMGPR
 
 __all__ = ["AGENT_FORMAT", "AGENT_VERSION", "POLICY_FORMAT", "agent_arrays", "read_agent",
-           "restore_dynamics", "policy_arrays"]
+           "restore_dynamics", "policy_arrays", "save_agent", "load_agent", "export_policy"]
+
+logger = logging.getLogger(__name__)
 
 AGENT_FORMAT = "pilco-agent"
 AGENT_VERSION = 1
@@ -326,3 +330,27 @@ def policy_arrays(controller, state_dim: int,
                 angle_indices=angle_indices)
     arrays[META_KEY] = np.array(json.dumps(meta))
     return arrays
+
+
+# -- files ----------------------------------------------------------------------------------
+def save_agent(agent, path) -> str:
+    """Write :func:`agent_arrays` of ``agent`` to ``path`` atomically; returns the path."""
+    written = write_npz_atomic(path, agent_arrays(agent))
+    logger.info("saved PILCO agent (%d transitions) to %s", len(agent.data[0]), written)
+    return written
+
+
+def load_agent(agent_class, path):
+    """Rebuild the agent stored at ``path`` as an instance of ``agent_class`` (PILCO)."""
+    kwargs, restore = read_agent(path)
+    agent = agent_class(**kwargs)
+    restore(agent.mgpr)
+    logger.info("loaded PILCO agent from %s", path)
+    return agent
+
+
+def export_policy(controller, path, state_dim: int, angle_indices: Sequence[int]) -> str:
+    """Write :func:`policy_arrays` to ``path`` atomically; returns the path written."""
+    written = write_npz_atomic(path, policy_arrays(controller, state_dim, angle_indices))
+    logger.info("exported %s policy to %s", type(controller).__name__, written)
+    return written
