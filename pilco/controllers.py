@@ -26,6 +26,7 @@ from .validation import (
     check_gaussian,
     check_matrix,
     check_max_action,
+    check_pair,
     check_positive_int,
     check_squash,
 )
@@ -197,9 +198,7 @@ class RbfController(_SquashedController):
 
     def set_data(self, data):
         """Set centers [n, D] and targets [n, U] (``n`` must stay the same)."""
-        if not isinstance(data, (tuple, list)) or len(data) != 2:
-            raise TypeError(f"data must be a pair (centers, targets), got {type(data).__name__}")
-        X, Y = data
+        X, Y = check_pair(data, "data", "(centers, targets)")
         X = check_matrix(as_2d_float(X, "centers"), (self.num_basis_functions, self.state_dim),
                          "centers")
         Y = check_matrix(as_2d_float(Y, "targets"),

@@ -23,7 +23,14 @@ from typing import Optional, Sequence
 import numpy as np
 
 from .features import angle_features
-from .validation import check_indices, check_matrix, check_states
+from .validation import (
+    as_2d_float,
+    check_indices,
+    check_matrix,
+    check_option,
+    check_positive_int,
+    check_states,
+)
 
 __all__ = ["Policy", "load_policy"]
 
@@ -61,34 +68,22 @@ class Policy:
     def __init__(self, kind: str, squash: str, state_dim: int, angle_indices: Sequence[int],
                  max_action, unsquashed_variance: float = 0.0, centers=None, beta=None,
                  lengthscales=None, variance=None, W=None, b=None):
-        if kind not in _KINDS:
-            raise ValueError(f"policy kind must be one of {_KINDS}, got {kind!r}")
-        if squash not in _SQUASHES:
-            raise ValueError(f"policy squash must be one of {_SQUASHES}, got {squash!r}")
-        self.kind = kind
-        self.squash = squash
-        self.state_dim = D = int(state_dim)
-        if D < 1:
-            raise ValueError(f"policy state_dim must be positive, got {D}")
+        self.kind = check_option(kind, _KINDS, "policy kind")
+        self.squash = check_option(squash, _SQUASHES, "policy squash")
+        self.state_dim = D = check_positive_int(int(state_dim), "policy state_dim")
         self.angle_indices = check_indices(np.asarray(angle_indices).reshape(-1).tolist(), D,
                                            "policy angle_indices")
         self.feature_dim = F = D + len(self.angle_indices)
         self.unsquashed_variance = float(unsquashed_variance)
         if kind == "rbf":
-            beta = np.asarray(beta, dtype=np.float64)
-            if beta.ndim != 2:
-                raise ValueError(f"policy beta must be 2-D [U, n], got shape {beta.shape}")
-            U, n = beta.shape
-            self.beta = _matrix(beta, (U, n), "beta")
+            self.beta = as_2d_float(beta, "policy beta")
+            U, n = self.beta.shape
             self.centers = _matrix(centers, (n, F), "centers")
             self.lengthscales = _matrix(lengthscales, (U, F), "lengthscales")
             self.variance = _matrix(variance, (U,), "variance")
             self._inv_ell = 1.0 / self.lengthscales
         else:
-            W = np.asarray(W, dtype=np.float64)
-            if W.ndim != 2:
-                raise ValueError(f"policy W must be 2-D [U, F], got shape {W.shape}")
-            U = W.shape[0]
+            U = as_2d_float(W, "policy W").shape[0]
             self.W = _matrix(W, (U, F), "W")
             self.b = _matrix(np.reshape(b, (1, -1)), (1, U), "b")
         self.control_dim = U

@@ -19,13 +19,12 @@ from .angles import trig_moments
 from .moments import eye_like
 from .protocols import Reward
 from .validation import (
-    _check_finite,
-    _to_numpy,
+    check_entries,
     check_gaussian,
-    check_matrix,
     check_positive_float,
     check_positive_int,
-    check_reward,
+    check_reward_list,
+    check_weight_matrix,
 )
 
 __all__ = ["ExponentialReward", "LinearReward", "CombinedRewards", "CartPoleReward"]
@@ -77,15 +76,9 @@ class ExponentialReward(_Reward):
     def __init__(self, state_dim: int, W=None, t=None):
         super().__init__()
         self.state_dim = D = check_positive_int(state_dim, "state_dim")
-        W = np.eye(D) if W is None else check_matrix(W, (D, D), "W")
-        if not np.allclose(W, W.T):
-            raise ValueError("W must be symmetric")
-        if np.min(np.linalg.eigvalsh(W)) < -1e-10 * max(1.0, np.abs(W).max()):
-            raise ValueError("W must be positive semi-definite")
-        t = np.zeros((1, D)) if t is None else _to_numpy(t, "t").reshape(1, -1)
-        if t.shape != (1, D):
-            raise ValueError(f"t (the target) must have {D} entries, got {t.shape[1]}")
-        _check_finite(t, "t")
+        W = np.eye(D) if W is None else check_weight_matrix(W, D, "W")
+        t = np.zeros((1, D)) if t is None else check_entries(t, D, "t", "t (the target)")
+        t = t.reshape(1, -1)
         self.W = gpflow.Parameter(W, trainable=False)
         self.t = gpflow.Parameter(t, trainable=False)
 
@@ -99,10 +92,7 @@ class LinearReward(_Reward):
     def __init__(self, state_dim: int, W):
         super().__init__()
         self.state_dim = D = check_positive_int(state_dim, "state_dim")
-        W = _to_numpy(W, "W").reshape(-1, 1)
-        if W.shape != (D, 1):
-            raise ValueError(f"W must have {D} entries, got {W.shape[0]}")
-        _check_finite(W, "W")
+        W = check_entries(W, D, "W").reshape(-1, 1)
         self.W = gpflow.Parameter(W, trainable=False)
 
     def moments(self, m, s):
@@ -120,20 +110,9 @@ class CombinedRewards(_Reward):
     def __init__(self, state_dim: int, rewards: Sequence[Reward], coefs=None):
         super().__init__()
         self.state_dim = check_positive_int(state_dim, "state_dim")
-        if not isinstance(rewards, (list, tuple)):
-            raise TypeError(f"rewards must be a list of rewards, got {type(rewards).__name__}")
-        if len(rewards) == 0:
-            raise ValueError("rewards must not be empty")
-        for i, r in enumerate(rewards):
-            check_reward(r, name=f"rewards[{i}]")
-            if r.state_dim != self.state_dim:
-                raise ValueError(f"every reward must have state_dim {self.state_dim}, got "
-                                 f"{r.state_dim} for {type(r).__name__}")
-        self.base_rewards = list(rewards)
-        coefs = np.ones(len(rewards)) if coefs is None else _to_numpy(coefs, "coefs").reshape(-1)
-        if coefs.size != len(rewards):
-            raise ValueError(f"coefs must have {len(rewards)} entries, got {coefs.size}")
-        _check_finite(coefs, "coefs")
+        self.base_rewards = check_reward_list(rewards, self.state_dim)
+        n = len(self.base_rewards)
+        coefs = np.ones(n) if coefs is None else check_entries(coefs, n, "coefs")
         self.coefs = gpflow.Parameter(coefs, trainable=False)
 
     def moments(self, m, s):

@@ -31,13 +31,17 @@ __all__ = [
     "check_seed",
     "check_bool",
     "check_indices",
-    "check_choice",
     "check_matrix",
     "check_states",
     "check_ratio_bound",
     "check_squash",
     "check_reward",
     "check_controller",
+    "check_option",
+    "check_entries",
+    "check_weight_matrix",
+    "check_reward_list",
+    "check_pair",
 ]
 
 
@@ -89,8 +93,7 @@ def as_2d_float(x, name: str, allow_empty: bool = False) -> np.ndarray:
 def check_data(data, name: str = "data", x_dim: Optional[int] = None,
                y_dim: Optional[int] = None) -> Tuple[np.ndarray, np.ndarray]:
     """Check a regression data set ``(X [N, Din], Y [N, E])`` and return it as float64."""
-    if not isinstance(data, (tuple, list)) or len(data) != 2:
-        raise TypeError(f"{name} must be a pair (X, Y), got {type(data).__name__}")
+    check_pair(data, name)
     X = as_2d_float(data[0], f"{name} X")
     Y = as_2d_float(data[1], f"{name} Y")
     if X.shape[0] != Y.shape[0]:
@@ -263,13 +266,6 @@ def check_max_action(max_action, control_dim: int) -> np.ndarray:
     return arr
 
 
-def check_choice(value, choices: Sequence[str], name: str) -> str:
-    """One of the strings ``choices`` (compared in upper case), or a clear error."""
-    if not isinstance(value, str) or value.upper() not in choices:
-        raise ValueError(f"{name} must be one of {tuple(choices)}, got {value!r}")
-    return value.upper()
-
-
 def check_matrix(value, shape: Tuple[int, ...], name: str) -> np.ndarray:
     """A finite float64 array of exactly ``shape``, or a clear error."""
     arr = _to_numpy(value, name)
@@ -361,3 +357,52 @@ def check_controller(controller, feature_dim: int, control_dim: int, state_dim: 
             f"data has {control_dim} action columns"
         )
     return controller
+
+
+def check_option(value, options: Sequence[str], name: str, ignore_case: bool = False) -> str:
+    """One of the strings ``options`` (returned in upper case with ``ignore_case``)."""
+    key = value.upper() if ignore_case and isinstance(value, str) else value
+    if not isinstance(value, str) or key not in options:
+        raise ValueError(f"{name} must be one of {tuple(options)}, got {value!r}")
+    return key
+
+
+def check_entries(value, size: int, name: str, label: Optional[str] = None) -> np.ndarray:
+    """``size`` finite numbers (any shape with that many entries), flattened to [size]."""
+    arr = _to_numpy(value, name).reshape(-1)
+    if arr.size != size:
+        raise ValueError(f"{label or name} must have {size} entries, got {arr.size}")
+    _check_finite(arr, name)
+    return arr
+
+
+def check_weight_matrix(W, dim: int, name: str = "W") -> np.ndarray:
+    """A finite symmetric positive semi-definite weight matrix [dim, dim]."""
+    W = check_matrix(W, (dim, dim), name)
+    if not np.allclose(W, W.T):
+        raise ValueError(f"{name} must be symmetric")
+    if np.min(np.linalg.eigvalsh(W)) < -1e-10 * max(1.0, np.abs(W).max()):
+        raise ValueError(f"{name} must be positive semi-definite")
+    return W
+
+
+def check_reward_list(rewards, state_dim: int, name: str = "rewards") -> list:
+    """A non-empty list of rewards (:class:`pilco.protocols.Reward`) on a state of
+    ``state_dim`` dimensions."""
+    if not isinstance(rewards, (list, tuple)):
+        raise TypeError(f"{name} must be a list of rewards, got {type(rewards).__name__}")
+    if len(rewards) == 0:
+        raise ValueError(f"{name} must not be empty")
+    for i, r in enumerate(rewards):
+        check_reward(r, name=f"{name}[{i}]")
+        if r.state_dim != state_dim:
+            raise ValueError(f"every reward must have state_dim {state_dim}, got "
+                             f"{r.state_dim} for {type(r).__name__}")
+    return list(rewards)
+
+
+def check_pair(data, name: str, what: str = "(X, Y)"):
+    """A pair (tuple or list of two), or a clear error."""
+    if not isinstance(data, (tuple, list)) or len(data) != 2:
+        raise TypeError(f"{name} must be a pair {what}, got {type(data).__name__}")
+    return data

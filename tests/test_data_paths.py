@@ -109,3 +109,19 @@ def test_replaced_model_no_longer_drives_the_agent():
     X, Y = more_data()
     old.set_data((X, Y))
     assert len(agent.data[0]) == 8
+
+
+def test_gp_data_without_raw_states(tmp_path):
+    agent = make_agent(angles=(1,))
+    X, Y = more_data()
+    gp_X = agent.gp_inputs(X)
+    gp_X[:, 1:3] *= 0.5  # (sin, cos) columns that no angle produces
+    agent.set_gp_data((gp_X, Y))
+    np.testing.assert_array_equal(np.asarray(agent.mgpr.X), gp_X)
+    with pytest.raises(ValueError, match=r"raw transitions are unknown .*PILCO\.set_data"):
+        agent.data
+    with pytest.raises(ValueError, match="raw transitions are unknown"):
+        agent.save(tmp_path / "agent.npz")
+    assert not list(tmp_path.iterdir())
+    agent.set_data((X, Y))  # raw transitions again: consistent and savable
+    assert_round_trip(agent, X, Y, tmp_path / "agent.npz")

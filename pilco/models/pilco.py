@@ -19,17 +19,17 @@ import tensorflow as tf
 from ..validation import (
     check_bool,
     check_columns,
-    check_choice,
     check_controller,
     check_covariance,
-    check_transitions,
     check_gaussian,
     check_indices,
     check_min_rel_improvement,
+    check_option,
     check_positive_int,
     check_reward,
     check_seed,
     check_state_row,
+    check_transitions,
 )
 from . import storage
 from .mgpr import MGPR
@@ -83,8 +83,7 @@ class PILCO(gpflow.base.Module):
         check_controller(controller, self.feature_dim, U, D)
         check_reward(reward, D)
         self.policy_input_noise = check_bool(policy_input_noise, "policy_input_noise")
-        self._horizon = tf.Variable(check_positive_int(horizon, "horizon"), trainable=False,
-                                    dtype=tf.int32, name="horizon")
+        horizon = check_positive_int(horizon, "horizon")
         self.num_induced_points = num_induced_points
         self._transitions = Transitions(X, Y, D, self.angle_indices)
         gp_data = (self.gp_inputs(X), Y)
@@ -97,10 +96,8 @@ class PILCO(gpflow.base.Module):
         m0 = X[0:1, :D] if m_init is None else m_init
         S0 = 0.01 * np.eye(D) if S_init is None else S_init
         m0, S0 = check_gaussian(m0, S0, D, "initial state")
-        self._m_init = tf.Variable(m0, trainable=False, name="m_init")
-        self._S_init = tf.Variable(S0, trainable=False, name="S_init")
         self._rollout = Rollout(controller, reward, D, U, self.angle_indices,
-                                self.policy_input_noise)
+                                self.policy_input_noise, horizon, m0, S0)
         self._policy_optimizer = GuardedScipy()
 
     # -- properties ---------------------------------------------------------------------
@@ -125,28 +122,28 @@ class PILCO(gpflow.base.Module):
 
     @property
     def horizon(self) -> int:
-        return int(self._horizon.numpy())
+        return int(self._rollout.horizon.numpy())
 
     @horizon.setter
     def horizon(self, value: int):
-        self._horizon.assign(check_positive_int(value, "horizon"))
+        self._rollout.horizon.assign(check_positive_int(value, "horizon"))
 
     @property
     def m_init(self) -> np.ndarray:
-        return self._m_init.numpy()
+        return self._rollout.m_init.numpy()
 
     @m_init.setter
     def m_init(self, value):
-        m, _ = check_gaussian(value, self._S_init.numpy(), self.state_dim, "initial state")
-        self._m_init.assign(m)
+        m, _ = check_gaussian(value, self._rollout.S_init.numpy(), self.state_dim, "initial state")
+        self._rollout.m_init.assign(m)
 
     @property
     def S_init(self) -> np.ndarray:
-        return self._S_init.numpy()
+        return self._rollout.S_init.numpy()
 
     @S_init.setter
     def S_init(self, value):
-        self._S_init.assign(check_covariance(value, self.state_dim, "initial state covariance"))
+        self._rollout.S_init.assign(check_covariance(value, self.state_dim, "initial state covariance"))
 
     @property
     def mgpr(self) -> MGPR:
@@ -172,6 +169,13 @@ class PILCO(gpflow.base.Module):
         """Replace the transitions ``(X [N, D + U], Y [N, D])`` the dynamics model learns from."""
         self._transitions.replace(self.mgpr, data)
 
+    def set_gp_data(self, gp_data):
+        """Give the dynamics model GP inputs and targets ``(X [N, F + U], Y [N, D])``
+        directly (angles as sin, cos columns that need not come from any angle). With angle
+        dimensions the raw transitions are then unknown: :attr:`data` and :meth:`save`
+        raise a ValueError until :meth:`set_data` gives raw ones."""
+        self._transitions.replace_gp_data(self.mgpr, gp_data)
+
     def one_step_prediction(self, X):
         """Predicted state differences ``x_{t+1} - x_t`` at raw transition inputs.
 
@@ -185,9 +189,9 @@ class PILCO(gpflow.base.Module):
     # -- prediction -------------------------------------------------------------------------
     def _initial(self, m, s, horizon):
         if m is None:
-            m = self._m_init.numpy()
+            m = self._rollout.m_init.numpy()
         if s is None:
-            s = self._S_init.numpy()
+            s = self._rollout.S_init.numpy()
         m, s = check_gaussian(m, s, self.state_dim, "initial state")
         H = self.horizon if horizon is None else check_positive_int(horizon, "horizon")
         self._rollout.refresh(self.mgpr)
@@ -235,19 +239,10 @@ class PILCO(gpflow.base.Module):
         logger.info("dynamics model trained in %.2f s", time.perf_counter() - t0)
         return losses
 
-    def _policy_loss(self):
-        """Negative total expected reward from the initial state (scalar; the dynamics
-        model as of the last refresh)."""
-        _, _, total = self._rollout.total_reward(
-            tf.convert_to_tensor(self._m_init), tf.convert_to_tensor(self._S_init),
-            tf.convert_to_tensor(self._horizon),
-        )
-        return -total[0, 0]
-
     def expected_return(self) -> float:
         """Total expected reward of the current policy from the initial state distribution."""
         self._rollout.refresh(self.mgpr)
-        return float(-self._policy_loss().numpy())
+        return float(-self._rollout.policy_loss().numpy())
 
     def optimize_policy(self, maxiter: int = 50, restarts: int = 1, seed: Optional[int] = None,
                         callback: Optional[Callable[[int], None]] = None,
@@ -268,14 +263,14 @@ class PILCO(gpflow.base.Module):
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
         patience = check_positive_int(patience, "patience")
-        method = check_choice(method, POLICY_METHODS, "method")
+        method = check_option(method, POLICY_METHODS, "method", ignore_case=True)
         min_rel_improvement = check_min_rel_improvement(min_rel_improvement)
         rng = np.random.default_rng(check_seed(seed))
         if restarts > 1 and not callable(getattr(self.controller, "randomize", None)):
             raise ValueError(f"restarts > 1 needs a controller with a randomize(seed=...) "
                              f"method; {type(self.controller).__name__} has none")
         self._rollout.refresh(self.mgpr)
-        return search_policy(self._policy_loss, self.controller, self._policy_optimizer,
+        return search_policy(self._rollout.policy_loss, self.controller, self._policy_optimizer,
                              maxiter, restarts, rng, method, callback, min_rel_improvement,
                              patience)
 

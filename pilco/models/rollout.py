@@ -39,11 +39,17 @@ class Rollout(gpflow.base.Module):
         reward: a :class:`pilco.protocols.Reward` on the raw state.
         state_dim: D; ``control_dim``: U; ``angle_indices``: the angle dimensions.
         policy_input_noise: the policy sees ``s + diag(noise) / 2`` instead of ``s``.
+        horizon, m_init [1, D], S_init [D, D]: the policy objective's horizon and start
+            distribution, kept in the variables of the same names (checked by the caller).
     """
 
     def __init__(self, controller: Controller, reward: Reward, state_dim: int,
-                 control_dim: int, angle_indices: Sequence[int], policy_input_noise: bool):
+                 control_dim: int, angle_indices: Sequence[int], policy_input_noise: bool,
+                 horizon: int, m_init, S_init):
         super().__init__()
+        self.horizon = tf.Variable(horizon, trainable=False, dtype=tf.int32, name="horizon")
+        self.m_init = tf.Variable(m_init, trainable=False, name="m_init")
+        self.S_init = tf.Variable(S_init, trainable=False, name="S_init")
         self.controller = controller
         self.reward = reward
         self.state_dim = D = state_dim
@@ -133,6 +139,15 @@ class Rollout(gpflow.base.Module):
                               tf.TensorShape([D, D]), tf.TensorShape([1, 1])),
         )
         return m, s, total
+
+    def policy_loss(self):
+        """The policy objective: minus the total expected reward of ``horizon`` steps from
+        ``N(m_init, S_init)`` (a scalar), with the dynamics model of the last refresh."""
+        _, _, total = self.total_reward(
+            tf.convert_to_tensor(self.m_init), tf.convert_to_tensor(self.S_init),
+            tf.convert_to_tensor(self.horizon),
+        )
+        return -total[0, 0]
 
     @tf.function(autograph=False)
     def trajectory(self, m0, s0, horizon):

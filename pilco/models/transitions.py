@@ -10,7 +10,10 @@ whichever way data arrive:
   several agents) is seen through the model's data listener: without angle dimensions the
   GP inputs are the raw data and are adopted; with angles data that do not match the raw
   transitions are refused with a :class:`ValueError` naming ``PILCO.set_data``;
-- assigning ``agent.mgpr = model`` checks the model's data the same way.
+- assigning ``agent.mgpr = model`` checks the model's data the same way;
+- ``PILCO.set_gp_data`` gives GP inputs that need not come from any raw state (e.g. a
+  reference model's inputs): the raw transitions are then unknown, and reading
+  ``PILCO.data`` or saving the agent raises a :class:`ValueError` until ``set_data``.
 """
 from __future__ import annotations
 
@@ -34,14 +37,17 @@ class Transitions:
         self.angle_indices = tuple(angle_indices)
         self._X, self._Y = X, Y
         self._model = None
+        self._raw_known = True
+        self._accept_any = False
 
     @property
     def data(self) -> Tuple[np.ndarray, np.ndarray]:
         """Copies of ``(X [N, D + U], Y [N, D])``."""
+        if not self._raw_known:
+            raise ValueError("the agent's dynamics model holds GP inputs given by "
+                             "PILCO.set_gp_data: its raw transitions are unknown (give them "
+                             "to PILCO.set_data to save the agent or read PILCO.data)")
         return self._X.copy(), self._Y.copy()
-
-    def __len__(self) -> int:
-        return len(self._X)
 
     def gp_inputs(self, X) -> np.ndarray:
         """Raw ``[x, u]`` rows [N, D + U] -> GP inputs [N, F + U] (angles as sin, cos)."""
@@ -54,13 +60,24 @@ class Transitions:
     def replace(self, model, data) -> None:
         """Set new raw transitions and the matching GP data of ``model`` (an MGPR)."""
         X, Y = check_data(data, "data", x_dim=self._X.shape[1], y_dim=self.state_dim)
-        old = self._X, self._Y
-        self._X, self._Y = X, Y
+        old = self._X, self._Y, self._raw_known
+        self._X, self._Y, self._raw_known = X, Y, True
         try:
             model.set_data((self.gp_inputs(X), Y))
         except BaseException:
-            self._X, self._Y = old
+            self._X, self._Y, self._raw_known = old
             raise
+
+    def replace_gp_data(self, model, gp_data) -> None:
+        """Give ``model`` GP data ``(X [N, F + U], Y [N, D])`` directly; without angle
+        dimensions they are the raw transitions, with angles the raw ones become unknown."""
+        self._accept_any = True
+        try:
+            model.set_data(gp_data)
+        finally:
+            self._accept_any = False
+        if self.angle_indices:
+            self._raw_known = False
 
     def attach(self, model) -> None:
         """Check that ``model`` holds these transitions' GP data (adopting its data when
@@ -76,10 +93,13 @@ class Transitions:
         if not self.angle_indices:
             self._X, self._Y = np.array(gp_X, dtype=np.float64), np.array(Y, dtype=np.float64)
             return
+        if self._accept_any or not self._raw_known:
+            return
         if not (gp_X.shape == (len(self._X), gp_X.shape[1]) and Y.shape == self._Y.shape
                 and np.array_equal(gp_X, self.gp_inputs(self._X)) and np.array_equal(Y, self._Y)):
             raise ValueError(
                 f"the dynamics model of an agent with angle dimensions {list(self.angle_indices)} "
                 f"cannot take GP inputs directly (raw angles cannot be recovered from sin and "
-                f"cos): give the raw transitions to PILCO.set_data((X, Y)) instead"
+                f"cos): give the raw transitions to PILCO.set_data((X, Y)) instead (or GP "
+                f"inputs without raw states to PILCO.set_gp_data)"
             )
