@@ -3,9 +3,12 @@
 Sub-modules:
 
 - :mod:`pilco.models`: ``MGPR``, ``SMGPR`` (GP dynamics with moment matching) and ``PILCO``.
+- :mod:`pilco.protocols`: what ``PILCO`` calls on a controller and a reward (to write your own).
 - :mod:`pilco.controllers`: squashing functions and linear / RBF policies.
 - :mod:`pilco.rewards`: saturating (exponential), linear, combined and cart-pole rewards.
-- :mod:`pilco.angles`: sin/cos augmentation of angle dimensions under a Gaussian.
+- :mod:`pilco.angles`: sin/cos augmentation of angle dimensions under a Gaussian
+  (:mod:`pilco.features`: the same features of known states, with NumPy).
+- :mod:`pilco.persistence`: saving and loading agents, exporting policies.
 - :mod:`pilco.envs`: gymnasium environments of the paper (cart-pole, Fetch joint reacher).
 - :mod:`pilco.deploy`: NumPy-only policy evaluation for robots (no TensorFlow import).
 """

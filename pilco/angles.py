@@ -11,6 +11,8 @@ import numpy as np
 import tensorflow as tf
 from gpflow.config import default_float
 
+from .features import non_angle_indices
+
 __all__ = ["trig_moments", "augment_state"]
 
 
@@ -68,7 +70,8 @@ def augment_state(m, s, angle_indices: Sequence[int]):
     """Distribution of the features ``[x_other, sin θ1, cos θ1, ...]`` for x ~ N(m, s).
 
     The non-angle dimensions are kept in order and each angle is replaced by its
-    (sin, cos) pair appended after them. Shapes: m [1, D], s [D, D] ->
+    (sin, cos) pair appended after them (the layout of :mod:`pilco.features`, whose
+    :func:`~pilco.features.angle_features` is the mean of these features at a known state). Shapes: m [1, D], s [D, D] ->
     Mf [1, F], Sf [F, F], Cf [D, F] with F = D + len(angle_indices) and
     ``Cf = inv(s) Cov[x, features]``.
     """
@@ -78,7 +81,7 @@ def augment_state(m, s, angle_indices: Sequence[int]):
     ang = list(angle_indices)
     if not ang:
         return m, s, tf.eye(D, dtype=m.dtype)
-    keep = [d for d in range(D) if d not in ang]
+    keep = non_angle_indices(D, ang)
     Mt, St, Ct = trig_moments(m, s, ang)
     sel = tf.constant(np.eye(D)[:, keep], dtype=m.dtype)  # [D, K]
     Cf = tf.concat([sel, Ct], axis=1)  # [D, F]

@@ -1,8 +1,9 @@
 """Policies and the squashing functions that bound their actions.
 
 A controller maps a Gaussian state ``N(m, s)`` to the Gaussian moments of its action:
-``compute_action(m, s) -> (M [1, U], S [U, U], V [D, U])`` with
-``V = inv(s) Cov[x, u]``. Actions are bounded by a squashing function applied to the
+``moments(m, s) -> (M [1, U], S [U, U], V [D, U])`` with ``V = inv(s) Cov[x, u]``
+(the protocol :class:`pilco.protocols.Controller`; ``compute_action`` is the same with
+its inputs checked). Actions are bounded by a squashing function applied to the
 unsquashed action's moments:
 
 - :func:`squash_sin`: ``u = e * sin(v)``;
@@ -19,8 +20,16 @@ import tensorflow as tf
 from gpflow import Parameter
 from gpflow.config import default_float
 
-from . import moments
-from .validation import check_gaussian, check_positive_int, check_max_action, as_2d_float
+from . import moments as gp_moments
+from .validation import (
+    as_2d_float,
+    check_gaussian,
+    check_matrix,
+    check_max_action,
+    check_pair,
+    check_positive_int,
+    check_squash,
+)
 
 __all__ = ["squash_sin", "squash_sat", "LinearController", "RbfController"]
 
@@ -88,17 +97,43 @@ def squash_sat(m, s, max_action=None):
     return M, S, C
 
 
-def _check_squash(squash):
-    """A squashing function ``(m, s, max_action) -> (M, S, C)`` or None, or a clear error."""
-    if squash is not None and not callable(squash):
-        raise TypeError(
-            f"squash must be a function such as squash_sin or squash_sat (or None), got "
-            f"{squash!r}"
-        )
-    return squash
+class _SquashedController(gpflow.base.Module):
+    """What both policies share: dimensions, bounds, the squash, and the public protocol
+    (:class:`pilco.protocols.Controller`) around an unsquashed prediction."""
+
+    def __init__(self, state_dim: int, control_dim: int, max_action, squash):
+        super().__init__()
+        self.state_dim = check_positive_int(state_dim, "state_dim")
+        self.control_dim = check_positive_int(control_dim, "control_dim")
+        self.max_action = check_max_action(max_action, self.control_dim)
+        self.squash = check_squash(squash)
+
+    def prepare(self):
+        """State-independent pieces for the current parameters (None: nothing to do)."""
+        return None
+
+    def _unsquashed(self, m, s, prepared):
+        """Moments of the unsquashed action: M [1, U], S [U, U], V [D, U]."""
+        raise NotImplementedError
+
+    def moments(self, m, s, squash: bool = True, prepared=None):
+        """Action moments. Shapes: m [1, D], s [D, D] -> M [1, U], S [U, U], V [D, U].
+
+        ``prepared`` is :meth:`prepare`'s result, computed here when None.
+        """
+        M, S, V = self._unsquashed(m, s, self.prepare() if prepared is None else prepared)
+        if squash and self.squash is not None:
+            M, S, C = self.squash(M, S, self.max_action)
+            V = tf.matmul(V, C)
+        return M, S, V
+
+    def compute_action(self, m, s, squash: bool = True):
+        """Action moments with the input checked. Shapes as :meth:`moments`."""
+        m, s = check_gaussian(m, s, self.state_dim, "state")
+        return self.moments(m, s, squash)
 
 
-class LinearController(gpflow.base.Module):
+class LinearController(_SquashedController):
     """Affine policy ``u = squash(x W^T + b)``.
 
     Parameters: ``W`` [U, D], ``b`` [1, U] (trainable).
@@ -106,33 +141,16 @@ class LinearController(gpflow.base.Module):
 
     def __init__(self, state_dim: int, control_dim: int, max_action=1.0, squash=squash_sin,
                  seed: Optional[int] = None):
-        super().__init__()
-        self.state_dim = check_positive_int(state_dim, "state_dim")
-        self.control_dim = check_positive_int(control_dim, "control_dim")
-        self.max_action = check_max_action(max_action, self.control_dim)
-        self.squash = _check_squash(squash)
+        super().__init__(state_dim, control_dim, max_action, squash)
         rng = np.random.default_rng(seed)
         self.W = Parameter(rng.uniform(-0.1, 0.1, (self.control_dim, self.state_dim)))
         self.b = Parameter(np.zeros((1, self.control_dim)))
 
-    def compute_action(self, m, s, squash: bool = True):
-        """Action moments. Shapes: m [1, D], s [D, D] -> M [1, U], S [U, U], V [D, U]."""
-        m, s = check_gaussian(m, s, self.state_dim, "state")
-        return self._action(m, s, squash)
-
-    def context(self):
-        """Per-evaluation pieces shared by many steps: none for a linear policy."""
-        return None
-
-    def _action(self, m, s, squash=True, ctx=None):
+    def _unsquashed(self, m, s, prepared):
         W = tf.convert_to_tensor(self.W)
         M = tf.matmul(m, W, transpose_b=True) + self.b
         S = tf.matmul(W, tf.matmul(s, W, transpose_b=True))
-        V = tf.transpose(W)
-        if squash and self.squash is not None:
-            M, S, C = self.squash(M, S, self.max_action)
-            V = tf.matmul(V, C)
-        return M, S, V
+        return M, S, tf.transpose(W)
 
     def randomize(self, scale: float = 0.1, seed: Optional[int] = None):
         """Draw fresh parameters: W, b ~ N(0, scale^2)."""
@@ -153,7 +171,7 @@ class _PolicyOutput(gpflow.base.Module):
         gpflow.set_trainable(self.likelihood.variance, False)
 
 
-class RbfController(gpflow.base.Module):
+class RbfController(_SquashedController):
     """Radial-basis-function policy, built as a deterministic GP (PILCO's ``congp``).
 
     Each action dimension is the posterior mean of a GP with a squared-exponential
@@ -169,12 +187,8 @@ class RbfController(gpflow.base.Module):
     def __init__(self, state_dim: int, control_dim: int, num_basis_functions: int,
                  max_action=1.0, squash: Optional[Callable] = squash_sin,
                  seed: Optional[int] = None):
-        super().__init__()
-        self.state_dim = check_positive_int(state_dim, "state_dim")
-        self.control_dim = check_positive_int(control_dim, "control_dim")
+        super().__init__(state_dim, control_dim, max_action, squash)
         self.num_basis_functions = check_positive_int(num_basis_functions, "num_basis_functions")
-        self.max_action = check_max_action(max_action, self.control_dim)
-        self.squash = _check_squash(squash)
         rng = np.random.default_rng(seed)
         self.centers = Parameter(rng.standard_normal((self.num_basis_functions, self.state_dim)))
         self.targets = Parameter(
@@ -184,21 +198,11 @@ class RbfController(gpflow.base.Module):
 
     def set_data(self, data):
         """Set centers [n, D] and targets [n, U] (``n`` must stay the same)."""
-        if not isinstance(data, (tuple, list)) or len(data) != 2:
-            raise TypeError(f"data must be a pair (centers, targets), got {type(data).__name__}")
-        X, Y = data
-        X = as_2d_float(X, "centers")
-        Y = as_2d_float(Y, "targets")
-        if X.shape != (self.num_basis_functions, self.state_dim):
-            raise ValueError(
-                f"centers must have shape ({self.num_basis_functions}, {self.state_dim}), "
-                f"got {X.shape}"
-            )
-        if Y.shape != (self.num_basis_functions, self.control_dim):
-            raise ValueError(
-                f"targets must have shape ({self.num_basis_functions}, {self.control_dim}), "
-                f"got {Y.shape}"
-            )
+        X, Y = check_pair(data, "data", "(centers, targets)")
+        X = check_matrix(as_2d_float(X, "centers"), (self.num_basis_functions, self.state_dim),
+                         "centers")
+        Y = check_matrix(as_2d_float(Y, "targets"),
+                         (self.num_basis_functions, self.control_dim), "targets")
         self.centers.assign(X)
         self.targets.assign(Y)
 
@@ -209,32 +213,21 @@ class RbfController(gpflow.base.Module):
         sn2 = tf.stack([tf.convert_to_tensor(g.likelihood.variance) for g in self.models])
         return ell, sf2, sn2
 
-    def factorize(self) -> moments.Factorization:
+    def factorize(self) -> gp_moments.Factorization:
         """Deterministic-GP pieces (beta, no K^-1) for the current parameters."""
         ell, sf2, sn2 = self.hyperparameters()
-        return moments.factorize(
+        return gp_moments.factorize(
             tf.convert_to_tensor(self.centers), tf.convert_to_tensor(self.targets),
             ell, sf2, sn2, with_inverse=False,
         )
 
-    def compute_action(self, m, s, squash: bool = True):
-        """Action moments. Shapes: m [1, D], s [D, D] -> M [1, U], S [U, U], V [D, U]."""
-        m, s = check_gaussian(m, s, self.state_dim, "state")
-        return self._action(m, s, squash)
-
-    def context(self) -> moments.Predictor:
-        """Input-independent prediction pieces for the current parameters, computed once
+    def prepare(self) -> gp_moments.Predictor:
+        """State-independent prediction pieces for the current parameters, computed once
         per objective evaluation and shared by every step of a rollout."""
-        return moments.prepare(self.factorize())
+        return gp_moments.prepare(self.factorize())
 
-    def _action(self, m, s, squash=True, ctx: Optional[moments.Predictor] = None):
-        if ctx is None:
-            ctx = self.context()
-        M, S, V = moments.predict(m, s, ctx)
-        if squash and self.squash is not None:
-            M, S, C = self.squash(M, S, self.max_action)
-            V = tf.matmul(V, C)
-        return M, S, V
+    def _unsquashed(self, m, s, prepared: gp_moments.Predictor):
+        return gp_moments.predict(m, s, prepared)
 
     def randomize(self, scale: float = 1.0, seed: Optional[int] = None):
         """Draw fresh centers ~ N(0, scale^2), targets ~ N(0, 0.1^2), lengthscales ~ 1."""

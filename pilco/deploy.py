@@ -22,6 +22,16 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .features import angle_features
+from .validation import (
+    as_2d_float,
+    check_indices,
+    check_matrix,
+    check_option,
+    check_positive_int,
+    check_states,
+)
+
 __all__ = ["Policy", "load_policy"]
 
 logger = logging.getLogger(__name__)
@@ -35,12 +45,7 @@ _SQUASHES = ("sin", "sat", "none")
 
 
 def _matrix(value, shape, name: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != tuple(shape):
-        raise ValueError(f"policy {name} must have shape {tuple(shape)}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"policy {name} contains NaN or inf values")
-    return arr
+    return check_matrix(value, shape, f"policy {name}")
 
 
 class Policy:
@@ -63,38 +68,22 @@ class Policy:
     def __init__(self, kind: str, squash: str, state_dim: int, angle_indices: Sequence[int],
                  max_action, unsquashed_variance: float = 0.0, centers=None, beta=None,
                  lengthscales=None, variance=None, W=None, b=None):
-        if kind not in _KINDS:
-            raise ValueError(f"policy kind must be one of {_KINDS}, got {kind!r}")
-        if squash not in _SQUASHES:
-            raise ValueError(f"policy squash must be one of {_SQUASHES}, got {squash!r}")
-        self.kind = kind
-        self.squash = squash
-        self.state_dim = D = int(state_dim)
-        if D < 1:
-            raise ValueError(f"policy state_dim must be positive, got {D}")
-        self.angle_indices = tuple(int(a) for a in np.asarray(angle_indices).reshape(-1))
-        if any(not 0 <= a < D for a in self.angle_indices) or len(set(self.angle_indices)) != len(
-                self.angle_indices):
-            raise ValueError(f"policy angle_indices {self.angle_indices} are invalid for a "
-                             f"state of dimension {D}")
-        self._keep = [d for d in range(D) if d not in self.angle_indices]
+        self.kind = check_option(kind, _KINDS, "policy kind")
+        self.squash = check_option(squash, _SQUASHES, "policy squash")
+        self.state_dim = D = check_positive_int(int(state_dim), "policy state_dim")
+        self.angle_indices = check_indices(np.asarray(angle_indices).reshape(-1).tolist(), D,
+                                           "policy angle_indices")
         self.feature_dim = F = D + len(self.angle_indices)
         self.unsquashed_variance = float(unsquashed_variance)
         if kind == "rbf":
-            beta = np.asarray(beta, dtype=np.float64)
-            if beta.ndim != 2:
-                raise ValueError(f"policy beta must be 2-D [U, n], got shape {beta.shape}")
-            U, n = beta.shape
-            self.beta = _matrix(beta, (U, n), "beta")
+            self.beta = as_2d_float(beta, "policy beta")
+            U, n = self.beta.shape
             self.centers = _matrix(centers, (n, F), "centers")
             self.lengthscales = _matrix(lengthscales, (U, F), "lengthscales")
             self.variance = _matrix(variance, (U,), "variance")
             self._inv_ell = 1.0 / self.lengthscales
         else:
-            W = np.asarray(W, dtype=np.float64)
-            if W.ndim != 2:
-                raise ValueError(f"policy W must be 2-D [U, F], got shape {W.shape}")
-            U = W.shape[0]
+            U = as_2d_float(W, "policy W").shape[0]
             self.W = _matrix(W, (U, F), "W")
             self.b = _matrix(np.reshape(b, (1, -1)), (1, U), "b")
         self.control_dim = U
@@ -109,31 +98,9 @@ class Policy:
                 f"{extra})")
 
     # -- evaluation ------------------------------------------------------------------------
-    def _check_state(self, state) -> np.ndarray:
-        if isinstance(state, (str, bytes)) or state is None:
-            raise TypeError(f"state must be an array of numbers, got {type(state).__name__}")
-        try:
-            x = np.asarray(state, dtype=np.float64)
-        except (TypeError, ValueError) as err:
-            raise TypeError(f"state must be an array of numbers: {err}") from None
-        if x.ndim not in (1, 2):
-            raise ValueError(f"state must have shape [{self.state_dim}] or "
-                             f"[N, {self.state_dim}], got {x.shape}")
-        if x.shape[-1] != self.state_dim:
-            raise ValueError(f"state must have {self.state_dim} entries per row (the policy's "
-                             f"state dimension), got shape {x.shape}")
-        if not np.all(np.isfinite(x)):
-            bad = tuple(int(i) for i in np.argwhere(~np.isfinite(x))[0])
-            raise ValueError(f"state contains NaN or inf (first at index {bad})")
-        return x
-
     def features(self, states: np.ndarray) -> np.ndarray:
         """Policy inputs: states [N, D] -> features [N, F] (angles as sin, cos pairs)."""
-        if not self.angle_indices:
-            return states
-        ang = states[:, list(self.angle_indices)]
-        trig = np.stack([np.sin(ang), np.cos(ang)], axis=-1).reshape(len(states), -1)
-        return np.concatenate([states[:, self._keep], trig], axis=1)
+        return angle_features(states, self.angle_indices)
 
     def unsquashed(self, features: np.ndarray) -> np.ndarray:
         """Unsquashed actions: features [N, F] -> [N, U]."""
@@ -160,7 +127,7 @@ class Policy:
 
     def __call__(self, state) -> np.ndarray:
         """The action at a measured state: [D] -> [U], or a batch [N, D] -> [N, U]."""
-        x = self._check_state(state)
+        x = check_states(state, self.state_dim, "state")
         single = x.ndim == 1
         X = x.reshape(1, -1) if single else x
         u = self.squash_actions(self.unsquashed(self.features(X)))

@@ -255,42 +255,52 @@ class Predictor(NamedTuple):
     """Everything of a moment-matching prediction that does not depend on the input.
 
     Built by :func:`prepare` once (e.g. before a horizon loop) and used by :func:`predict`
-    at every step. With E outputs, n centers, input dimension D, P = E(E+1)/2 pairs:
-    ``XT`` [E, D, n] centers over lengthscales (transposed), ``iL`` [E, D] inverse
-    lengthscales, ``iLo`` [E, D, D] their outer products, ``beta`` [E, n],
-    ``sf2`` [E], ``XI``/``XJ`` [P, D, n] centers over squared lengthscales of each pair's
-    first/second output, ``iL2I``/``iL2J`` [P, D], ``sqPo`` [P, D, D] outer product of
-    ``sqrt(1/l_i^2 + 1/l_j^2)``, ``isqPo`` [P, D, D] that of its inverse, ``betaI``/``betaJ`` [P, n],
-    ``W`` [P, n, n] pair weights or None, ``W_constant`` (no gradient flows to W) and
-    ``deterministic`` (Python bools).
+    at every step. E outputs, n centers, input dimension D, P = E(E+1)/2 output pairs
+    (i <= j, see :func:`symmetric_pairs`); ``l_i`` [D] are output i's lengthscales.
     """
 
-    XT: tf.Tensor
-    iL: tf.Tensor
-    iLo: tf.Tensor
+    #: [E, D, n] the centers divided by each output's lengthscales, transposed
+    scaled_centers: tf.Tensor
+    #: [E, D] ``1 / l_i``
+    inv_lengthscales: tf.Tensor
+    #: [E, D, D] outer product ``(1 / l_i) (1 / l_i)^T``
+    inv_lengthscales_outer: tf.Tensor
+    #: [E, n] weights of the predictive mean, ``K^-1 y``
     beta: tf.Tensor
-    sf2: tf.Tensor
-    XI: tf.Tensor
-    XJ: tf.Tensor
-    iL2I: tf.Tensor
-    iL2J: tf.Tensor
-    sqPo: tf.Tensor
-    isqPo: tf.Tensor
-    betaI: tf.Tensor
-    betaJ: tf.Tensor
-    W: Optional[tf.Tensor]
-    W_constant: bool
+    #: [E] signal variances ``sf_i^2``
+    signal_variance: tf.Tensor
+    #: [P, D, n] the centers over ``l_i^2`` of each pair's first output i
+    first_centers: tf.Tensor
+    #: [P, D, n] the centers over ``l_j^2`` of each pair's second output j
+    second_centers: tf.Tensor
+    #: [P, D] ``1 / l_i^2`` of each pair's first output
+    first_inv_sq_lengthscales: tf.Tensor
+    #: [P, D] ``1 / l_j^2`` of each pair's second output
+    second_inv_sq_lengthscales: tf.Tensor
+    #: [P, D, D] outer product of ``r = sqrt(1 / l_i^2 + 1 / l_j^2)`` with itself
+    pair_scale_outer: tf.Tensor
+    #: [P, D, D] outer product of ``1 / r`` with itself
+    pair_inv_scale_outer: tf.Tensor
+    #: [P, n] ``beta`` of each pair's first output
+    first_beta: tf.Tensor
+    #: [P, n] ``beta`` of each pair's second output
+    second_beta: tf.Tensor
+    #: [P, n, n] pair weights (:func:`pair_weights`), or None for a deterministic GP
+    pair_weights: Optional[tf.Tensor]
+    #: Python bool: the pair weights were given, so no gradient flows to them
+    weights_constant: bool
+    #: Python bool: the GP carries no model uncertainty (the RBF policy)
     deterministic: bool
 
 
-def prepare(fact: Factorization, W: Optional[tf.Tensor] = None,
+def prepare(factorization: Factorization, W: Optional[tf.Tensor] = None,
             deterministic: Optional[bool] = None) -> Predictor:
     """Input-independent pieces of :func:`predict` for a factorised GP.
 
     ``W`` [P, n, n] (from :func:`pair_weights`) is treated as a constant; when omitted the
     weights are formed from ``beta`` and ``iK`` with gradients flowing through them.
     """
-    centers, beta, iK, ell, sf2 = fact
+    centers, beta, iK, ell, sf2 = factorization
     E = beta.shape[0]
     I, J, _ = symmetric_pairs(E)
     if deterministic is None:
@@ -301,16 +311,18 @@ def prepare(fact: Factorization, W: Optional[tf.Tensor] = None,
     iL2I = tf.gather(iL2, I)
     iL2J = tf.gather(iL2, J)
     sqP = tf.sqrt(iL2I + iL2J)
-    betaI = tf.gather(beta, I)
-    betaJ = tf.gather(beta, J)
-    W_constant = W is not None
+    weights_constant = W is not None
     if W is None and not deterministic:
         W = pair_weights(beta, iK)
     return Predictor(
-        XT=XT * iL[:, :, None], iL=iL, iLo=iL[:, :, None] * iL[:, None, :], beta=beta,
-        sf2=sf2, XI=XT * iL2I[:, :, None], XJ=XT * iL2J[:, :, None], iL2I=iL2I, iL2J=iL2J,
-        sqPo=sqP[:, :, None] * sqP[:, None, :], isqPo=1.0 / (sqP[:, :, None] * sqP[:, None, :]), betaI=betaI, betaJ=betaJ,
-        W=W, W_constant=W_constant, deterministic=bool(deterministic),
+        scaled_centers=XT * iL[:, :, None], inv_lengthscales=iL,
+        inv_lengthscales_outer=iL[:, :, None] * iL[:, None, :], beta=beta,
+        signal_variance=sf2, first_centers=XT * iL2I[:, :, None],
+        second_centers=XT * iL2J[:, :, None], first_inv_sq_lengthscales=iL2I,
+        second_inv_sq_lengthscales=iL2J, pair_scale_outer=sqP[:, :, None] * sqP[:, None, :],
+        pair_inv_scale_outer=1.0 / (sqP[:, :, None] * sqP[:, None, :]),
+        first_beta=tf.gather(beta, I), second_beta=tf.gather(beta, J),
+        pair_weights=W, weights_constant=weights_constant, deterministic=bool(deterministic),
     )
 
 
@@ -328,44 +340,47 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
     Shapes: m [1, D], s [D, D] -> M [1, E], S [E, E], V [D, E] (``V = inv(s) Cov[x, f]``).
     """
     E = pred.beta.shape[0]
-    I, J, index = symmetric_pairs(E)
+    first, second, pair_of = symmetric_pairs(E)
     eye = eye_like(s)
 
     # Mean and inv(s) Cov[x, f(x)]: B = L^-1 s L^-1 + I per output.
-    iNT = pred.XT - (m * pred.iL)[:, :, None]  # (centers - m) / l, transposed, [E, D, n]
-    Binv, logdetB = _inv_logdet(s * pred.iLo + eye)
-    BiN = tf.matmul(Binv, iNT)  # [E, D, n]
-    lb = tf.exp(-0.5 * tf.reduce_sum(iNT * BiN, axis=1)) * pred.beta  # [E, n]
-    c = pred.sf2 * tf.exp(-0.5 * logdetB)  # [E]
-    M = c * tf.reduce_sum(lb, axis=-1)
-    V = (c[:, None] * pred.iL) * tf.linalg.matvec(BiN, lb)  # [E, D]
+    diff = pred.scaled_centers - (m * pred.inv_lengthscales)[:, :, None]  # (c - m) / l, [E, D, n]
+    B_inv, logdet_B = _inv_logdet(s * pred.inv_lengthscales_outer + eye)
+    B_inv_diff = tf.matmul(B_inv, diff)  # [E, D, n]
+    weighted = tf.exp(-0.5 * tf.reduce_sum(diff * B_inv_diff, axis=1)) * pred.beta  # [E, n]
+    scale = pred.signal_variance * tf.exp(-0.5 * logdet_B)  # [E]
+    M = scale * tf.reduce_sum(weighted, axis=-1)
+    V = (scale[:, None] * pred.inv_lengthscales) * tf.linalg.matvec(B_inv_diff, weighted)
 
     # Second moments of each output pair (i <= j).
-    k = tf.math.log(pred.sf2)[:, None] - 0.5 * tf.reduce_sum(tf.square(iNT), axis=1)  # [E, n]
+    log_k = (tf.math.log(pred.signal_variance)[:, None]
+             - 0.5 * tf.reduce_sum(tf.square(diff), axis=1))  # [E, n]
     # With A = P^1/2 s P^1/2 + I (P = 1/l_i^2 + 1/l_j^2): R = s P + I has det R = det A
     # and R^-1 s = P^-1/2 (I - A^-1) P^-1/2 =: T, symmetric.
-    Ainv, logdetA = _inv_logdet(s * pred.sqPo + eye)
-    T = (eye - Ainv) * pred.isqPo
-    tP = tf.exp(-0.5 * logdetA)  # [P]
-    kI, kJ = tf.gather(k, I), tf.gather(k, J)
-    mI, mJ = m * pred.iL2I, m * pred.iL2J  # m / l_i^2, m / l_j^2, [P, D]
-    if pred.W_constant:
+    A_inv, logdet_A = _inv_logdet(s * pred.pair_scale_outer + eye)
+    T = (eye - A_inv) * pred.pair_inv_scale_outer
+    det_factor = tf.exp(-0.5 * logdet_A)  # [P]
+    log_k_first, log_k_second = tf.gather(log_k, first), tf.gather(log_k, second)
+    m_first = m * pred.first_inv_sq_lengthscales  # m / l_i^2, [P, D]
+    m_second = m * pred.second_inv_sq_lengthscales  # m / l_j^2, [P, D]
+    if pred.weights_constant:
         # centers and weights constant: the fused block with its cheaper gradient
-        raw = _pair_second_moments(T, mI, mJ, kI, kJ, pred.XI, pred.XJ, pred.W)
+        raw = _pair_second_moments(T, m_first, m_second, log_k_first, log_k_second,
+                                   pred.first_centers, pred.second_centers, pred.pair_weights)
     else:
-        iiI = pred.XI - mI[:, :, None]  # (centers - m) / l_i^2, [P, D, n]
-        iiJ = pred.XJ - mJ[:, :, None]
-        _, _, leftT, rightT = _pair_exponent_factors(T, iiI, iiJ, kI, kJ)
+        iiI = pred.first_centers - m_first[:, :, None]  # (centers - m) / l_i^2, [P, D, n]
+        iiJ = pred.second_centers - m_second[:, :, None]
+        _, _, leftT, rightT = _pair_exponent_factors(T, iiI, iiJ, log_k_first, log_k_second)
         Q = tf.exp(tf.matmul(leftT, rightT, transpose_a=True))  # [P, n, n]
         if pred.deterministic:
-            raw = tf.reduce_sum(pred.betaI * tf.linalg.matvec(Q, pred.betaJ), axis=-1)
+            raw = tf.reduce_sum(pred.first_beta * tf.linalg.matvec(Q, pred.second_beta), axis=-1)
         else:
-            raw = tf.reduce_sum(Q * pred.W, axis=[1, 2])
-    S = tf.gather(tP * raw, index)  # [E, E]
+            raw = tf.reduce_sum(Q * pred.pair_weights, axis=[1, 2])
+    S = tf.gather(det_factor * raw, pair_of)  # [E, E]
     if pred.deterministic:
         S += tf.constant(deterministic_jitter * np.eye(E), dtype=S.dtype)
     else:
-        S += tf.linalg.diag(pred.sf2)
+        S += tf.linalg.diag(pred.signal_variance)
     S -= M[:, None] * M[None, :]
     return M[None, :], S, tf.transpose(V)
 

@@ -2,321 +2,46 @@
 
 Two file formats, both a single ``.npz`` (a zip of ``.npy`` arrays, read with
 ``allow_pickle=False``: no code objects are ever stored) holding a JSON metadata string
-under the key ``__meta__``:
+under the key ``__meta__`` (the layout is :mod:`pilco.models.storage`):
 
 - **agent files** (:func:`save_agent` / :func:`load_agent`, ``format: "pilco-agent"``) keep
   everything needed to continue learning: the raw transitions, every hyperparameter of
   the dynamics GPs (and the inducing inputs of a sparse model), the controller's type,
   constructor settings and parameters, the reward (recursively for combined rewards),
   horizon, initial state distribution, angle indices and the other ``PILCO`` settings.
-  Every trainable quantity is stored twice: its value and its raw, unconstrained
-  variable, so a reloaded agent computes bit-identical predictions and actions.
+  A reloaded agent computes bit-identical predictions and actions.
 - **policy files** (:func:`export_policy`, ``format: "pilco-policy"``) hold only what
   :func:`pilco.deploy.load_policy` needs to evaluate the deterministic action at a measured
   state with NumPy alone (no TensorFlow on the robot).
 
-All writes are atomic: the file is written next to its destination under a temporary
-name, flushed and fsync'ed, then moved into place with :func:`os.replace`, so a crash
-never leaves a truncated file behind.
+All writes are atomic (:mod:`pilco.files`): a crash never leaves a truncated file behind.
+These functions are the same as the agent's ``save``, ``PILCO.load`` and
+``export_policy`` methods.
 """
 from __future__ import annotations
 
-import inspect
-import json
-import logging
-import os
-from typing import Dict, List, Sequence
-
-import gpflow
-import numpy as np
-
-from . import __version__, moments
-from .controllers import LinearController, RbfController, squash_sat, squash_sin
-from .deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
-from .files import write_npz_atomic
-from .models.mgpr import MGPR
+from .controllers import LinearController, RbfController
+from .models import storage
 from .models.pilco import PILCO
-from .models.smgpr import SMGPR
-from .rewards import CartPoleReward, CombinedRewards, ExponentialReward, LinearReward
+from .models.storage import AGENT_FORMAT, POLICY_FORMAT
 
 __all__ = ["save_agent", "load_agent", "export_policy", "AGENT_FORMAT", "POLICY_FORMAT"]
 
-logger = logging.getLogger(__name__)
 
-AGENT_FORMAT = "pilco-agent"
-AGENT_VERSION = 1
-
-_SQUASHES = {"squash_sin": squash_sin, "squash_sat": squash_sat}
-# Short names used in policy files (read by pilco.deploy).
-_SQUASH_KIND = {None: "none", "squash_sin": "sin", "squash_sat": "sat"}
-
-
-# -- files ----------------------------------------------------------------------------------
-def _read_npz(path, expected_format: str):
-    """Arrays and metadata of a file written by this module; clear errors otherwise."""
-    path = os.fspath(path)
-    arrays, meta = read_npz(path, expected_format)
-    if meta.get("format") != expected_format:
-        raise ValueError(f"{path} holds format {meta.get('format')!r}, expected "
-                         f"{expected_format!r}")
-    return arrays, meta
-
-
-def _get(arrays: Dict[str, np.ndarray], key: str, path) -> np.ndarray:
-    try:
-        return arrays[key]
-    except KeyError:
-        raise ValueError(f"{path} is incomplete: entry {key!r} is missing") from None
-
-
-# -- parameters -----------------------------------------------------------------------------
-def _put_params(arrays, trainable, key: str, params: Sequence[gpflow.Parameter]) -> None:
-    """Store a list of same-shaped parameters stacked: values and raw variables."""
-    arrays[key] = np.stack([p.numpy() for p in params])
-    arrays[key + "_raw"] = np.stack([p.unconstrained_variable.numpy() for p in params])
-    trainable[key] = [bool(p.trainable) for p in params]
-
-
-def _get_params(params: Sequence[gpflow.Parameter], arrays, trainable, key: str, path) -> None:
-    values = _get(arrays, key, path)
-    raw = arrays.get(key + "_raw")
-    flags = trainable.get(key)
-    if len(values) != len(params):
-        raise ValueError(f"{path}: entry {key!r} holds {len(values)} values, expected "
-                         f"{len(params)}")
-    for i, p in enumerate(params):
-        if raw is not None and raw[i].shape == tuple(p.unconstrained_variable.shape):
-            # the exact stored variable: no round trip through the transform (a value on
-            # its bound, such as a noise variance at its floor, would not survive one)
-            p.unconstrained_variable.assign(raw[i])
-        else:
-            p.assign(values[i])
-        if flags is not None:
-            gpflow.set_trainable(p, bool(flags[i]))
-
-
-# -- components -----------------------------------------------------------------------------
-def _squash_name(squash):
-    if squash is None:
-        return None
-    for name, fn in _SQUASHES.items():
-        if squash is fn:
-            return name
-    raise TypeError(
-        f"cannot save a controller with squash function {squash!r}: only squash_sin, "
-        f"squash_sat or None can be stored"
-    )
-
-
-def _controller_spec(controller, arrays, trainable) -> dict:
-    kind = type(controller)
-    if kind is RbfController:
-        spec = dict(type="RbfController", state_dim=controller.state_dim,
-                    control_dim=controller.control_dim,
-                    num_basis_functions=controller.num_basis_functions,
-                    squash=_squash_name(controller.squash))
-        _put_params(arrays, trainable, "controller/centers", [controller.centers])
-        _put_params(arrays, trainable, "controller/targets", [controller.targets])
-        _put_params(arrays, trainable, "controller/lengthscales",
-                    [g.kernel.lengthscales for g in controller.models])
-        _put_params(arrays, trainable, "controller/variance",
-                    [g.kernel.variance for g in controller.models])
-        _put_params(arrays, trainable, "controller/noise",
-                    [g.likelihood.variance for g in controller.models])
-    elif kind is LinearController:
-        spec = dict(type="LinearController", state_dim=controller.state_dim,
-                    control_dim=controller.control_dim, squash=_squash_name(controller.squash))
-        _put_params(arrays, trainable, "controller/W", [controller.W])
-        _put_params(arrays, trainable, "controller/b", [controller.b])
-    else:
-        raise TypeError(
-            f"cannot save a controller of type {kind.__name__}: supported are RbfController "
-            f"and LinearController"
-        )
-    arrays["controller/max_action"] = np.asarray(controller.max_action, dtype=np.float64)
-    return spec
-
-
-def _build_controller(spec: dict, arrays, trainable, path):
-    kind = spec.get("type")
-    squash = spec.get("squash")
-    if squash is not None and squash not in _SQUASHES:
-        raise ValueError(f"{path}: unknown squash function {squash!r}")
-    squash = None if squash is None else _SQUASHES[squash]
-    max_action = _get(arrays, "controller/max_action", path)
-    if kind == "RbfController":
-        c = RbfController(spec["state_dim"], spec["control_dim"], spec["num_basis_functions"],
-                          max_action=max_action, squash=squash)
-        _get_params([c.centers], arrays, trainable, "controller/centers", path)
-        _get_params([c.targets], arrays, trainable, "controller/targets", path)
-        _get_params([g.kernel.lengthscales for g in c.models], arrays, trainable,
-                    "controller/lengthscales", path)
-        _get_params([g.kernel.variance for g in c.models], arrays, trainable,
-                    "controller/variance", path)
-        _get_params([g.likelihood.variance for g in c.models], arrays, trainable,
-                    "controller/noise", path)
-    elif kind == "LinearController":
-        c = LinearController(spec["state_dim"], spec["control_dim"], max_action=max_action,
-                             squash=squash)
-        _get_params([c.W], arrays, trainable, "controller/W", path)
-        _get_params([c.b], arrays, trainable, "controller/b", path)
-    else:
-        raise ValueError(f"{path}: unknown controller type {kind!r}")
-    return c
-
-
-def _reward_spec(reward, arrays, prefix: str) -> dict:
-    kind = type(reward)
-    if kind is ExponentialReward:
-        arrays[prefix + "W"] = reward.W.numpy()
-        arrays[prefix + "t"] = reward.t.numpy()
-        return dict(type="ExponentialReward", state_dim=reward.state_dim)
-    if kind is LinearReward:
-        arrays[prefix + "W"] = reward.W.numpy()
-        return dict(type="LinearReward", state_dim=reward.state_dim)
-    if kind is CombinedRewards:
-        arrays[prefix + "coefs"] = reward.coefs.numpy()
-        parts = [_reward_spec(r, arrays, f"{prefix}{i}/")
-                 for i, r in enumerate(reward.base_rewards)]
-        return dict(type="CombinedRewards", state_dim=reward.state_dim, rewards=parts)
-    if kind is CartPoleReward:
-        return dict(type="CartPoleReward", pendulum_length=reward.pendulum_length,
-                    width=reward.width)
-    raise TypeError(
-        f"cannot save a reward of type {kind.__name__}: supported are ExponentialReward, "
-        f"LinearReward, CombinedRewards and CartPoleReward"
-    )
-
-
-def _build_reward(spec: dict, arrays, prefix: str, path):
-    kind = spec.get("type")
-    if kind == "ExponentialReward":
-        return ExponentialReward(spec["state_dim"], W=_get(arrays, prefix + "W", path),
-                                 t=_get(arrays, prefix + "t", path))
-    if kind == "LinearReward":
-        return LinearReward(spec["state_dim"], W=_get(arrays, prefix + "W", path))
-    if kind == "CombinedRewards":
-        parts = [_build_reward(s, arrays, f"{prefix}{i}/", path)
-                 for i, s in enumerate(spec["rewards"])]
-        return CombinedRewards(spec["state_dim"], parts, coefs=_get(arrays, prefix + "coefs", path))
-    if kind == "CartPoleReward":
-        return CartPoleReward(pendulum_length=spec["pendulum_length"], width=spec["width"])
-    raise ValueError(f"{path}: unknown reward type {kind!r}")
-
-
-# Constructor settings of the dynamics model that are stored and restored.
-_GP_SETTINGS = ("noise_floor", "max_snr", "max_lengthscale_ratio")
-
-
-def _gp_spec(agent: PILCO, arrays, trainable) -> dict:
-    gp = agent.mgpr
-    kind = type(gp)
-    if kind not in (MGPR, SMGPR):
-        raise TypeError(f"cannot save a dynamics model of type {kind.__name__}: supported "
-                        f"are MGPR and SMGPR")
-    _put_params(arrays, trainable, "gp/lengthscales", [m.kernel.lengthscales for m in gp.models])
-    _put_params(arrays, trainable, "gp/variance", [m.kernel.variance for m in gp.models])
-    _put_params(arrays, trainable, "gp/noise", [m.likelihood.variance for m in gp.models])
-    spec = dict(type=kind.__name__)
-    spec.update({k: float(getattr(gp, k)) for k in _GP_SETTINGS if hasattr(gp, k)})
-    if kind is SMGPR:
-        _put_params(arrays, trainable, "gp/Z", [gp.inducing_variable.Z])
-        spec["num_induced_points"] = gp.num_induced_points
-    return spec
-
-
-def _restore_gp(agent: PILCO, spec: dict, arrays, trainable, path) -> None:
-    kind = spec.get("type")
-    if kind not in ("MGPR", "SMGPR"):
-        raise ValueError(f"{path}: unknown dynamics model type {kind!r}")
-    settings = {k: float(spec[k]) for k in _GP_SETTINGS
-                if k in spec and k in inspect.signature(MGPR.__init__).parameters}
-    if any(getattr(agent.mgpr, k, None) != v for k, v in settings.items()):
-        # e.g. the noise floor is part of the likelihood variance's transform: rebuild the
-        # model with the saved settings before restoring its values
-        gp_data = (agent.gp_inputs(agent._raw_X), agent._raw_Y)
-        if kind == "MGPR":
-            agent.mgpr = MGPR(gp_data, **settings)
-        else:
-            agent.mgpr = SMGPR(gp_data, spec["num_induced_points"], **settings)
-    gp = agent.mgpr
-    _get_params([m.kernel.lengthscales for m in gp.models], arrays, trainable,
-                "gp/lengthscales", path)
-    _get_params([m.kernel.variance for m in gp.models], arrays, trainable, "gp/variance", path)
-    _get_params([m.likelihood.variance for m in gp.models], arrays, trainable, "gp/noise", path)
-    if kind == "SMGPR":
-        _get_params([gp.inducing_variable.Z], arrays, trainable, "gp/Z", path)
-
-
-# -- agents ---------------------------------------------------------------------------------
 def save_agent(agent: PILCO, path) -> str:
     """Write ``agent`` to the single file ``path`` (e.g. ``run/agent.npz``), atomically.
 
-    Stored: raw data ``X [N, D + U]``, ``Y [N, D]``; GP hyperparameters (lengthscales
-    [E, F + U], signal and noise variances [E], inducing inputs Z [M, F + U] for a sparse
-    model); controller type, settings and parameters; reward type and parameters;
-    horizon, ``m_init`` [1, D], ``S_init`` [D, D], angle indices, ``num_induced_points``
-    and ``policy_input_noise``. Raises :class:`TypeError` for components that cannot be
-    stored (custom controllers, rewards, squash functions or dynamics models). Returns
-    the absolute path written.
+    Raises :class:`TypeError` for components that cannot be stored (custom controllers,
+    rewards, squash functions or dynamics models). Returns the absolute path written.
     """
     if type(agent) is not PILCO:
         raise TypeError(f"save_agent expects a PILCO agent, got {type(agent).__name__}")
-    arrays: Dict[str, np.ndarray] = {}
-    trainable: Dict[str, List[bool]] = {}
-    X, Y = agent.data
-    gp_X = agent.mgpr.X.numpy()
-    if gp_X.shape != (len(X), agent.feature_dim + agent.control_dim) or not np.array_equal(
-            gp_X, agent.gp_inputs(X)):
-        logger.warning("the dynamics model's data differ from the agent's raw data (was "
-                       "agent.mgpr.set_data called directly?); saving the agent's raw data")
-    arrays["data/X"], arrays["data/Y"] = X, Y
-    arrays["m_init"] = agent.m_init
-    arrays["S_init"] = agent.S_init
-    meta = dict(
-        format=AGENT_FORMAT, version=AGENT_VERSION, pilco_version=__version__,
-        state_dim=agent.state_dim, control_dim=agent.control_dim, horizon=agent.horizon,
-        angle_indices=list(agent.angle_indices),
-        num_induced_points=(None if agent.num_induced_points is None
-                            else int(agent.num_induced_points)),
-        policy_input_noise=bool(agent.policy_input_noise),
-        controller=_controller_spec(agent.controller, arrays, trainable),
-        reward=_reward_spec(agent.reward, arrays, "reward/"),
-        gp=_gp_spec(agent, arrays, trainable),
-        trainable=trainable,
-    )
-    arrays[META_KEY] = np.array(json.dumps(meta))
-    written = write_npz_atomic(path, arrays)
-    logger.info("saved PILCO agent (%d transitions) to %s", len(X), written)
-    return written
+    return agent.save(path)
 
 
 def load_agent(path) -> PILCO:
     """Rebuild an agent written by :func:`save_agent`; it predicts and acts identically."""
-    arrays, meta = _read_npz(path, AGENT_FORMAT)
-    version = meta.get("version")
-    if not isinstance(version, int) or version > AGENT_VERSION:
-        raise ValueError(f"{path} has agent format version {version!r}; this pilco "
-                         f"({__version__}) reads versions up to {AGENT_VERSION}")
-    trainable = meta.get("trainable", {})
-    controller = _build_controller(meta["controller"], arrays, trainable, path)
-    reward = _build_reward(meta["reward"], arrays, "reward/", path)
-    agent = PILCO(
-        (_get(arrays, "data/X", path), _get(arrays, "data/Y", path)), controller, reward,
-        horizon=meta["horizon"], m_init=_get(arrays, "m_init", path),
-        S_init=_get(arrays, "S_init", path), angle_indices=meta["angle_indices"],
-        num_induced_points=meta["num_induced_points"],
-        policy_input_noise=meta["policy_input_noise"],
-    )
-    _restore_gp(agent, meta["gp"], arrays, trainable, path)
-    logger.info("loaded PILCO agent from %s", path)
-    return agent
-
-
-# -- policies -------------------------------------------------------------------------------
-def _deterministic_jitter() -> float:
-    """Variance that moment matching adds to a deterministic GP's output (the RBF policy)."""
-    return float(inspect.signature(moments.moment_match).parameters["deterministic_jitter"].default)
+    return PILCO.load(path)
 
 
 def export_policy(agent, path) -> str:
@@ -333,45 +58,8 @@ def export_policy(agent, path) -> str:
     ``none``). Read it with :func:`pilco.deploy.load_policy`. Returns the path written.
     """
     if isinstance(agent, PILCO):
-        controller = agent.controller
-        angle_indices = list(agent.angle_indices)
-        state_dim = agent.state_dim
-    elif type(agent) in (RbfController, LinearController):
-        controller = agent
-        angle_indices = []
-        state_dim = agent.state_dim
-    else:
+        return agent.export_policy(path)
+    if type(agent) not in (RbfController, LinearController):
         raise TypeError(f"export_policy expects a PILCO agent or a controller, got "
                         f"{type(agent).__name__}")
-    squash = _SQUASH_KIND[_squash_name(controller.squash)]
-    arrays: Dict[str, np.ndarray] = dict(
-        state_dim=np.array(state_dim, dtype=np.int64),
-        angle_indices=np.array(angle_indices, dtype=np.int64).reshape(-1),
-        max_action=np.asarray(controller.max_action, dtype=np.float64).reshape(-1),
-    )
-    if type(controller) is RbfController:
-        kind = "rbf"
-        fact = controller.factorize()
-        ell, sf2, sn2 = (t.numpy() for t in controller.hyperparameters())
-        arrays.update(
-            centers=controller.centers.numpy(), targets=controller.targets.numpy(),
-            beta=fact.beta.numpy(), lengthscales=ell, variance=sf2, noise=sn2,
-            unsquashed_variance=np.array(_deterministic_jitter()),
-        )
-        if not np.all(np.isfinite(arrays["beta"])):
-            raise ValueError("the policy's weights (beta) are not finite; cannot export")
-    elif type(controller) is LinearController:
-        kind = "linear"
-        arrays.update(W=controller.W.numpy(), b=controller.b.numpy(),
-                      unsquashed_variance=np.array(0.0))
-    else:
-        raise TypeError(f"cannot export a controller of type {type(controller).__name__}: "
-                        f"supported are RbfController and LinearController")
-    meta = dict(format=POLICY_FORMAT, version=POLICY_VERSION, pilco_version=__version__,
-                kind=kind, squash=squash, state_dim=state_dim,
-                control_dim=controller.control_dim, feature_dim=controller.state_dim,
-                angle_indices=angle_indices)
-    arrays[META_KEY] = np.array(json.dumps(meta))
-    written = write_npz_atomic(path, arrays)
-    logger.info("exported %s policy (%s squash) to %s", kind, squash, written)
-    return written
+    return storage.export_policy(agent, path, agent.state_dim, [])

@@ -1,6 +1,8 @@
 """Rewards whose expectation and variance under a Gaussian state are computed in closed form.
 
-Every reward has ``compute_reward(m [1, D], s [D, D]) -> (mean [1, 1], variance [1, 1])``.
+Every reward has ``moments(m [1, D], s [D, D]) -> (mean [1, 1], variance [1, 1])`` (the
+protocol :class:`pilco.protocols.Reward`) and ``compute_reward``, the same with its inputs
+checked.
 PILCO maximises the sum of expected rewards over the horizon. A saturating
 ("exponential") reward ``exp(-(x - t)^T W (x - t) / 2)`` is PILCO's cost ``1 - reward``.
 """
@@ -15,12 +17,14 @@ from gpflow.config import default_float
 
 from .angles import trig_moments
 from .moments import eye_like
+from .protocols import Reward
 from .validation import (
-    _check_finite,
-    _to_numpy,
+    check_entries,
     check_gaussian,
     check_positive_float,
     check_positive_int,
+    check_reward_list,
+    check_weight_matrix,
 )
 
 __all__ = ["ExponentialReward", "LinearReward", "CombinedRewards", "CartPoleReward"]
@@ -47,23 +51,19 @@ def _exp_reward_moments(m, s, W, t):
 
 
 class _Reward(gpflow.base.Module):
+    """Base of the rewards of this module: :meth:`compute_reward` checks its input and
+    calls :meth:`moments`, the method of :class:`pilco.protocols.Reward`."""
+
     state_dim: int
 
     def compute_reward(self, m, s):
         """Expected reward and its variance. Shapes: m [1, D], s [D, D] -> [1, 1], [1, 1]."""
         m, s = check_gaussian(m, s, self.state_dim, "state")
-        return self._reward(m, s)
+        return self.moments(m, s)
 
-    def _reward(self, m, s):  # pragma: no cover - abstract
+    def moments(self, m, s):  # pragma: no cover - abstract
+        """Reward moments without input checks. Shapes as :meth:`compute_reward`."""
         raise NotImplementedError
-
-
-def _matrix(value, shape, name):
-    arr = _to_numpy(value, name)
-    if arr.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
-    _check_finite(arr, name)
-    return arr
 
 
 class ExponentialReward(_Reward):
@@ -76,19 +76,13 @@ class ExponentialReward(_Reward):
     def __init__(self, state_dim: int, W=None, t=None):
         super().__init__()
         self.state_dim = D = check_positive_int(state_dim, "state_dim")
-        W = np.eye(D) if W is None else _matrix(W, (D, D), "W")
-        if not np.allclose(W, W.T):
-            raise ValueError("W must be symmetric")
-        if np.min(np.linalg.eigvalsh(W)) < -1e-10 * max(1.0, np.abs(W).max()):
-            raise ValueError("W must be positive semi-definite")
-        t = np.zeros((1, D)) if t is None else _to_numpy(t, "t").reshape(1, -1)
-        if t.shape != (1, D):
-            raise ValueError(f"t (the target) must have {D} entries, got {t.shape[1]}")
-        _check_finite(t, "t")
+        W = np.eye(D) if W is None else check_weight_matrix(W, D, "W")
+        t = np.zeros((1, D)) if t is None else check_entries(t, D, "t", "t (the target)")
+        t = t.reshape(1, -1)
         self.W = gpflow.Parameter(W, trainable=False)
         self.t = gpflow.Parameter(t, trainable=False)
 
-    def _reward(self, m, s):
+    def moments(self, m, s):
         return _exp_reward_moments(m, s, tf.convert_to_tensor(self.W), tf.convert_to_tensor(self.t))
 
 
@@ -98,13 +92,10 @@ class LinearReward(_Reward):
     def __init__(self, state_dim: int, W):
         super().__init__()
         self.state_dim = D = check_positive_int(state_dim, "state_dim")
-        W = _to_numpy(W, "W").reshape(-1, 1)
-        if W.shape != (D, 1):
-            raise ValueError(f"W must have {D} entries, got {W.shape[0]}")
-        _check_finite(W, "W")
+        W = check_entries(W, D, "W").reshape(-1, 1)
         self.W = gpflow.Parameter(W, trainable=False)
 
-    def _reward(self, m, s):
+    def moments(self, m, s):
         W = tf.convert_to_tensor(self.W)
         return tf.matmul(m, W), tf.matmul(tf.transpose(W), tf.matmul(s, W))
 
@@ -116,35 +107,20 @@ class CombinedRewards(_Reward):
     neglected (exact when at most one term is random).
     """
 
-    def __init__(self, state_dim: int, rewards: Sequence[_Reward], coefs=None):
+    def __init__(self, state_dim: int, rewards: Sequence[Reward], coefs=None):
         super().__init__()
         self.state_dim = check_positive_int(state_dim, "state_dim")
-        if not isinstance(rewards, (list, tuple)):
-            raise TypeError(f"rewards must be a list of rewards, got {type(rewards).__name__}")
-        if len(rewards) == 0:
-            raise ValueError("rewards must not be empty")
-        for i, r in enumerate(rewards):
-            if not (hasattr(r, "_reward") and hasattr(r, "state_dim")):
-                raise TypeError(f"rewards[{i}] must be a reward (such as ExponentialReward), "
-                                f"got {type(r).__name__}")
-            if getattr(r, "state_dim", None) != self.state_dim:
-                raise ValueError(
-                    f"every reward must have state_dim {self.state_dim}, got "
-                    f"{getattr(r, 'state_dim', None)} for {type(r).__name__}"
-                )
-        self.base_rewards = list(rewards)
-        coefs = np.ones(len(rewards)) if coefs is None else _to_numpy(coefs, "coefs").reshape(-1)
-        if coefs.size != len(rewards):
-            raise ValueError(f"coefs must have {len(rewards)} entries, got {coefs.size}")
-        _check_finite(coefs, "coefs")
+        self.base_rewards = check_reward_list(rewards, self.state_dim)
+        n = len(self.base_rewards)
+        coefs = np.ones(n) if coefs is None else check_entries(coefs, n, "coefs")
         self.coefs = gpflow.Parameter(coefs, trainable=False)
 
-    def _reward(self, m, s):
+    def moments(self, m, s):
         mean = 0.0
         var = 0.0
         c = tf.convert_to_tensor(self.coefs)
         for i, r in enumerate(self.base_rewards):
-            mi, vi = r._reward(m, s)
+            mi, vi = r.moments(m, s)
             mean += c[i] * mi
             var += c[i] ** 2 * vi
         return mean, var
@@ -175,7 +151,7 @@ class CartPoleReward(_Reward):
         self._t = tf.constant([[0.0, 0.0, 0.0, np.pi, np.sin(np.pi), np.cos(np.pi)]],
                               dtype=default_float())
 
-    def _reward(self, m, s):
+    def moments(self, m, s):
         Mt, St, Ct = trig_moments(m, s, [3])
         cross = tf.matmul(s, Ct)
         M6 = tf.concat([m, Mt], axis=1)

@@ -1,21 +1,28 @@
 """Checks at the public API boundary: bad input is reported before TensorFlow sees it.
 
 Every check raises :class:`ValueError` (wrong values or shapes) or :class:`TypeError`
-(wrong kinds of object) whose message names the argument and the problem.
+(wrong kinds of object) whose message names the argument and the problem. All argument
+checks of the package live here.
+
+This module imports only NumPy and the standard library at import time (the NumPy-only
+:mod:`pilco.deploy` uses it); TensorFlow is imported by the checks that return tensors.
 """
 from __future__ import annotations
 
 import numbers
 from collections.abc import Iterable
-from typing import Optional, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
-import tensorflow as tf
-from gpflow.config import default_float
+
+from .protocols import Controller, Reward
 
 __all__ = [
     "as_2d_float",
     "check_data",
+    "check_transitions",
+    "check_columns",
+    "check_state_row",
     "check_gaussian",
     "check_covariance",
     "check_positive_int",
@@ -24,14 +31,25 @@ __all__ = [
     "check_seed",
     "check_bool",
     "check_indices",
+    "check_matrix",
+    "check_states",
+    "check_ratio_bound",
+    "check_squash",
+    "check_reward",
+    "check_controller",
+    "check_option",
+    "check_entries",
+    "check_weight_matrix",
+    "check_reward_list",
+    "check_pair",
 ]
 
 
 def _to_numpy(x, name: str) -> np.ndarray:
     if isinstance(x, (str, bytes)) or x is None:
         raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
-    if tf.is_tensor(x) or isinstance(x, tf.Variable):
-        x = x.numpy() if hasattr(x, "numpy") else tf.convert_to_tensor(x).numpy()
+    if callable(getattr(x, "numpy", None)):  # TensorFlow tensors, variables, parameters
+        x = x.numpy()
     try:
         raw = np.asarray(x)
     except (TypeError, ValueError) as err:  # e.g. ragged nested lists
@@ -75,8 +93,7 @@ def as_2d_float(x, name: str, allow_empty: bool = False) -> np.ndarray:
 def check_data(data, name: str = "data", x_dim: Optional[int] = None,
                y_dim: Optional[int] = None) -> Tuple[np.ndarray, np.ndarray]:
     """Check a regression data set ``(X [N, Din], Y [N, E])`` and return it as float64."""
-    if not isinstance(data, (tuple, list)) or len(data) != 2:
-        raise TypeError(f"{name} must be a pair (X, Y), got {type(data).__name__}")
+    check_pair(data, name)
     X = as_2d_float(data[0], f"{name} X")
     Y = as_2d_float(data[1], f"{name} Y")
     if X.shape[0] != Y.shape[0]:
@@ -88,6 +105,35 @@ def check_data(data, name: str = "data", x_dim: Optional[int] = None,
     if y_dim is not None and Y.shape[1] != y_dim:
         raise ValueError(f"{name} Y must have {y_dim} columns, got {Y.shape[1]}")
     return X, Y
+
+
+def check_transitions(data, name: str = "data") -> Tuple[np.ndarray, np.ndarray]:
+    """Raw transitions ``(X [N, D + U], Y [N, D])`` with at least one action column."""
+    X, Y = check_data(data, name)
+    if X.shape[1] <= Y.shape[1]:
+        raise ValueError(
+            f"{name} X must hold [state, action] with {Y.shape[1]} state columns (from Y) and "
+            f"at least one action column, got {X.shape[1]} columns"
+        )
+    return X, Y
+
+
+def check_columns(x, columns: int, name: str, meaning: str = "") -> np.ndarray:
+    """A finite float64 matrix [N, columns], or a clear error."""
+    arr = as_2d_float(x, name)
+    if arr.shape[1] != columns:
+        raise ValueError(f"{name} must have {columns} columns{' ' + meaning if meaning else ''}, "
+                         f"got {arr.shape[1]}")
+    return arr
+
+
+def check_state_row(x, dim: int, name: str = "state") -> np.ndarray:
+    """One measured state [dim] or [1, dim] of finite numbers, as float64 [1, dim]."""
+    x = _to_numpy(x, name)
+    x = as_2d_float(x.reshape(1, -1) if x.ndim == 1 else x, name)
+    if x.shape != (1, dim):
+        raise ValueError(f"{name} must have shape (1, {dim}), got {x.shape}")
+    return x
 
 
 def check_covariance(s, dim: int, name: str) -> np.ndarray:
@@ -126,6 +172,9 @@ def check_gaussian(m, s, dim: int, name: str = "state"):
         raise ValueError(f"{name} mean must have shape (1, {dim}), got {m.shape}")
     _check_finite(m, f"{name} mean")
     s = check_covariance(s, dim, f"{name} covariance")
+    import tensorflow as tf  # only here: the NumPy checks must not load TensorFlow
+    from gpflow.config import default_float
+
     f = default_float()
     m_out = (tf.reshape(tf.cast(m_in, f), (1, dim)) if tf.is_tensor(m_in)
              else tf.convert_to_tensor(m, dtype=f))
@@ -215,3 +264,145 @@ def check_max_action(max_action, control_dim: int) -> np.ndarray:
     if np.any(arr <= 0):
         raise ValueError(f"max_action must be positive, got {arr}")
     return arr
+
+
+def check_matrix(value, shape: Tuple[int, ...], name: str) -> np.ndarray:
+    """A finite float64 array of exactly ``shape``, or a clear error."""
+    arr = _to_numpy(value, name)
+    if arr.shape != tuple(shape):
+        raise ValueError(f"{name} must have shape {tuple(shape)}, got {arr.shape}")
+    _check_finite(arr, name)
+    return arr
+
+
+def check_states(state, dim: int, name: str = "state") -> np.ndarray:
+    """One measured state [dim] or a batch [N, dim] of finite numbers, as float64."""
+    if isinstance(state, (str, bytes)) or state is None:
+        raise TypeError(f"{name} must be an array of numbers, got {type(state).__name__}")
+    try:
+        x = np.asarray(state, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be an array of numbers: {err}") from None
+    if x.ndim not in (1, 2):
+        raise ValueError(f"{name} must have shape [{dim}] or [N, {dim}], got {x.shape}")
+    if x.shape[-1] != dim:
+        raise ValueError(f"{name} must have {dim} entries per row (the policy's state "
+                         f"dimension), got shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(x))[0])
+        raise ValueError(f"{name} contains NaN or inf (first at index {bad})")
+    return x
+
+
+def check_ratio_bound(value, name: str) -> float:
+    """A finite number > 1 (a bound on a ratio, such as a signal-to-noise ratio)."""
+    if not check_positive_float(value, name) > 1:
+        raise ValueError(f"{name} must be a finite number > 1, got {value}")
+    return float(value)
+
+
+def check_squash(squash):
+    """A squashing function ``(m, s, max_action) -> (M, S, C)`` or None, or a clear error."""
+    if squash is not None and not callable(squash):
+        raise TypeError(
+            f"squash must be a function such as squash_sin or squash_sat (or None), got "
+            f"{squash!r}"
+        )
+    return squash
+
+
+def _missing(obj, members: Sequence[str]) -> list:
+    return [name for name in members if not callable(getattr(obj, name, None))]
+
+
+def check_reward(reward, state_dim: Optional[int] = None, name: str = "reward"):
+    """An object following :class:`pilco.protocols.Reward` (with ``state_dim`` if given)."""
+    if (getattr(reward, "state_dim", None) is None or _missing(reward, ["moments"])
+            or not isinstance(reward, Reward)):
+        raise TypeError(
+            f"{name} must be a reward (such as ExponentialReward) following "
+            f"pilco.protocols.Reward: a state_dim attribute and a method moments(m, s), got "
+            f"{type(reward).__name__}"
+        )
+    if state_dim is not None and reward.state_dim != state_dim:
+        raise ValueError(f"{name}.state_dim is {reward.state_dim} but the state has "
+                         f"dimension {state_dim}")
+    return reward
+
+
+def check_controller(controller, feature_dim: int, control_dim: int, state_dim: int):
+    """An object following :class:`pilco.protocols.Controller` that reads ``feature_dim``
+    inputs (``state_dim`` plus one per angle) and returns ``control_dim`` actions."""
+    if getattr(controller, "state_dim", None) is None:
+        raise TypeError("controller must have a state_dim attribute (see "
+                        "pilco.protocols.Controller)")
+    missing = _missing(controller, ["prepare", "moments"])
+    if not hasattr(controller, "trainable_variables"):
+        missing.append("trainable_variables")
+    if missing or not isinstance(controller, Controller):
+        raise TypeError(
+            f"controller must follow pilco.protocols.Controller (state_dim, control_dim, "
+            f"trainable_variables, prepare() and moments(m, s, squash, prepared)); "
+            f"{type(controller).__name__} lacks {', '.join(missing) or 'control_dim'}"
+        )
+    if controller.state_dim != feature_dim:
+        raise ValueError(
+            f"controller.state_dim is {controller.state_dim} but the policy input has "
+            f"dimension {feature_dim} (state {state_dim} + one extra per angle in "
+            f"angle_indices)"
+        )
+    if getattr(controller, "control_dim", None) != control_dim:
+        raise ValueError(
+            f"controller.control_dim is {getattr(controller, 'control_dim', None)} but the "
+            f"data has {control_dim} action columns"
+        )
+    return controller
+
+
+def check_option(value, options: Sequence[str], name: str, ignore_case: bool = False) -> str:
+    """One of the strings ``options`` (returned in upper case with ``ignore_case``)."""
+    key = value.upper() if ignore_case and isinstance(value, str) else value
+    if not isinstance(value, str) or key not in options:
+        raise ValueError(f"{name} must be one of {tuple(options)}, got {value!r}")
+    return key
+
+
+def check_entries(value, size: int, name: str, label: Optional[str] = None) -> np.ndarray:
+    """``size`` finite numbers (any shape with that many entries), flattened to [size]."""
+    arr = _to_numpy(value, name).reshape(-1)
+    if arr.size != size:
+        raise ValueError(f"{label or name} must have {size} entries, got {arr.size}")
+    _check_finite(arr, name)
+    return arr
+
+
+def check_weight_matrix(W, dim: int, name: str = "W") -> np.ndarray:
+    """A finite symmetric positive semi-definite weight matrix [dim, dim]."""
+    W = check_matrix(W, (dim, dim), name)
+    if not np.allclose(W, W.T):
+        raise ValueError(f"{name} must be symmetric")
+    if np.min(np.linalg.eigvalsh(W)) < -1e-10 * max(1.0, np.abs(W).max()):
+        raise ValueError(f"{name} must be positive semi-definite")
+    return W
+
+
+def check_reward_list(rewards, state_dim: int, name: str = "rewards") -> list:
+    """A non-empty list of rewards (:class:`pilco.protocols.Reward`) on a state of
+    ``state_dim`` dimensions."""
+    if not isinstance(rewards, (list, tuple)):
+        raise TypeError(f"{name} must be a list of rewards, got {type(rewards).__name__}")
+    if len(rewards) == 0:
+        raise ValueError(f"{name} must not be empty")
+    for i, r in enumerate(rewards):
+        check_reward(r, name=f"{name}[{i}]")
+        if r.state_dim != state_dim:
+            raise ValueError(f"every reward must have state_dim {state_dim}, got "
+                             f"{r.state_dim} for {type(r).__name__}")
+    return list(rewards)
+
+
+def check_pair(data, name: str, what: str = "(X, Y)"):
+    """A pair (tuple or list of two), or a clear error."""
+    if not isinstance(data, (tuple, list)) or len(data) != 2:
+        raise TypeError(f"{name} must be a pair {what}, got {type(data).__name__}")
+    return data

@@ -1,6 +1,6 @@
 """Analytic gradients against central finite differences.
 
-The policy objective (the compiled horizon rollout, ``PILCO._policy_loss``) is
+The policy objective (the compiled horizon rollout, ``PILCO._rollout.policy_loss``) is
 differentiated by TensorFlow with respect to the policy's trainable (unconstrained)
 variables and compared with central differences ``(L(θ + h) - L(θ - h)) / 2h`` in
 float64. With ``h = 1e-5`` the truncation error is ~h^2 |L'''| ~ 1e-10 and the
@@ -87,13 +87,13 @@ def test_policy_objective_gradient_matches_finite_differences(kind, squash, angl
     F = 2 + len(angles)
     ctrl = make_controller(kind, squash, F)
     p = toy_pilco(ctrl, angles)
-    p._refresh_dynamics()
+    p.expected_return()  # factorises the dynamics model for policy_loss
     variables = p.controller.trainable_variables
     expected = {"rbf": 5 * F + 5 + F, "linear": F + 1}[kind]  # centers, targets, ell / W, b
     assert sum(int(np.prod(v.shape)) for v in variables) == expected
 
     with tf.GradientTape() as tape:
-        loss = p._policy_loss()
+        loss = p._rollout.policy_loss()
     grads = tape.gradient(loss, variables)
     assert all(g is not None for g in grads)
     loss0 = float(loss.numpy())
@@ -107,14 +107,14 @@ def test_policy_objective_gradient_matches_finite_differences(kind, squash, angl
             step = np.zeros(v0.size)
             step[i] = H_FD
             var.assign((v0.ravel() + step).reshape(v0.shape))
-            up = float(p._policy_loss().numpy())
+            up = float(p._rollout.policy_loss().numpy())
             var.assign((v0.ravel() - step).reshape(v0.shape))
-            down = float(p._policy_loss().numpy())
+            down = float(p._rollout.policy_loss().numpy())
             fd[i] = (up - down) / (2 * H_FD)
         var.assign(v0)
         assert_grad_close(grad.ravel(), fd, f"d loss / d {var.name}")
     # restoring the variables restores the objective
-    assert float(p._policy_loss().numpy()) == pytest.approx(loss0, rel=1e-12)
+    assert float(p._rollout.policy_loss().numpy()) == pytest.approx(loss0, rel=1e-12)
 
 
 # ---------------------------------------------------------------------------

@@ -174,7 +174,7 @@ def check_cartpole(case):
     raw[:, angles] = theta
     raw[:, D:] = dyn_X[:, -U:]
     pilco = PILCO((raw, dyn_Y), ctrl, reward, horizon=H, angle_indices=angles)
-    pilco.mgpr.set_data((dyn_X, dyn_Y))  # the reference's GP inputs, exactly
+    pilco.set_gp_data((dyn_X, dyn_Y))  # the reference's GP inputs, exactly
     assign_gp(pilco.mgpr.models, inp["dyn_lengthscales"], inp["dyn_signal_variance"],
               inp["dyn_noise_variance"])
     M, S = pilco.predict_trajectory(m0, S0, H)

@@ -169,7 +169,7 @@ def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
         fh.write(b"partial")
         raise OSError("disk full")
 
-    monkeypatch.setattr(persistence.np, "savez_compressed", broken)
+    monkeypatch.setattr(np, "savez_compressed", broken)
     with pytest.raises(OSError, match="disk full"):
         agent.save(path)
     assert path.read_bytes() == before
@@ -179,8 +179,8 @@ def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
 def test_write_is_flushed_and_renamed(tmp_path, monkeypatch):
     calls = []
     real_fsync, real_replace = os.fsync, os.replace
-    monkeypatch.setattr(persistence.os, "fsync", lambda fd: (calls.append("fsync"), real_fsync(fd)))
-    monkeypatch.setattr(persistence.os, "replace",
+    monkeypatch.setattr(os, "fsync", lambda fd: (calls.append("fsync"), real_fsync(fd)))
+    monkeypatch.setattr(os, "replace",
                         lambda a, b: (calls.append(("replace", Path(a).parent == Path(b).parent)),
                                       real_replace(a, b)))
     rbf_agent().save(tmp_path / "agent.npz")

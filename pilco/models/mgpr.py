@@ -37,6 +37,7 @@ from ..validation import (
     check_min_rel_improvement,
     check_positive_float,
     check_positive_int,
+    check_ratio_bound,
     check_seed,
 )
 
@@ -56,11 +57,10 @@ class MGPR(gpflow.base.Module):
     def __init__(self, data, noise_floor: float = 1e-6, max_snr: float = 500.0,
                  max_lengthscale_ratio: float = 100.0, name: Optional[str] = None):
         super().__init__(name=name)
-        for label, v in (("max_snr", max_snr), ("max_lengthscale_ratio", max_lengthscale_ratio)):
-            if not check_positive_float(v, label) > 1:
-                raise ValueError(f"{label} must be a finite number > 1, got {v}")
-        self.max_snr = float(max_snr)
-        self.max_lengthscale_ratio = float(max_lengthscale_ratio)
+        self._data_listeners: List[Callable[[np.ndarray, np.ndarray], None]] = []
+        self.max_snr = check_ratio_bound(max_snr, "max_snr")
+        self.max_lengthscale_ratio = check_ratio_bound(max_lengthscale_ratio,
+                                                       "max_lengthscale_ratio")
         X, Y = check_data(data, "data")
         self.noise_floor = check_positive_float(noise_floor, "noise_floor")
         self.num_outputs = Y.shape[1]
@@ -122,11 +122,26 @@ class MGPR(gpflow.base.Module):
         return self.X, self.Y
 
     def set_data(self, data):
-        """Replace the training data; shapes ``X [N, D]``, ``Y [N, E]`` (N may change)."""
+        """Replace the training data; shapes ``X [N, D]``, ``Y [N, E]`` (N may change).
+
+        Every listener (see :meth:`add_data_listener`) sees the data first and may refuse
+        them by raising; the model is then unchanged.
+        """
         X, Y = check_data(data, "data", x_dim=self.num_dims, y_dim=self.num_outputs)
+        for listener in list(self._data_listeners):
+            listener(X, Y)
         self._X.assign(X)
         for i, y in enumerate(self._Y):
             y.assign(Y[:, i : i + 1])
+
+    def add_data_listener(self, listener: Callable[[np.ndarray, np.ndarray], None]) -> None:
+        """Call ``listener(X [N, D], Y [N, E])`` (checked float64 arrays) on every
+        :meth:`set_data`, before the data are assigned; raising refuses the data."""
+        self._data_listeners.append(listener)
+
+    def remove_data_listener(self, listener) -> None:
+        """Stop calling ``listener`` (added by :meth:`add_data_listener`; no error if absent)."""
+        self._data_listeners[:] = [f for f in self._data_listeners if f != listener]
 
     # -- hyperparameters ------------------------------------------------------------------
     def hyperparameters(self):

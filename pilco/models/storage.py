@@ -1,0 +1,356 @@
+"""How each component of an agent is stored as named arrays, and read back.
+
+The layout of agent files (``format: "pilco-agent"``) and policy files
+(``format: "pilco-policy"``), both a single ``.npz`` (a zip of ``.npy`` arrays read with
+``allow_pickle=False``: no code objects are ever stored) holding a JSON metadata string
+under the key ``__meta__``. Every trainable quantity is stored twice: its value and its
+raw, unconstrained variable, so a reloaded agent computes bit-identical predictions.
+
+This module works on the public attributes of the components (controllers, rewards,
+dynamics models) and of the agent; :class:`pilco.models.PILCO` uses it for ``save``,
+``load`` and ``export_policy``, and :mod:`pilco.persistence` is the functional front end.
+"""
+from __future__ import annotations
+
+import inspect
+import json
+import logging
+import os
+from typing import Any, Dict, List, Sequence, Tuple
+
+import gpflow
+import numpy as np
+
+from .. import __version__, moments
+from ..controllers import LinearController, RbfController, squash_sat, squash_sin
+from ..deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
+from ..files import write_npz_atomic
+from ..rewards import CartPoleReward, CombinedRewards, ExponentialReward, LinearReward
+from .mgpr import MGPR
+from .smgpr import SMGPR
+
+__all__ = ["AGENT_FORMAT", "AGENT_VERSION", "POLICY_FORMAT", "agent_arrays", "read_agent",
+           "restore_dynamics", "policy_arrays", "save_agent", "load_agent", "export_policy"]
+
+logger = logging.getLogger(__name__)
+
+AGENT_FORMAT = "pilco-agent"
+AGENT_VERSION = 1
+
+_SQUASHES = {"squash_sin": squash_sin, "squash_sat": squash_sat}
+# Short names used in policy files (read by pilco.deploy).
+_SQUASH_KIND = {None: "none", "squash_sin": "sin", "squash_sat": "sat"}
+
+
+# -- files ----------------------------------------------------------------------------------
+def _read_npz(path, expected_format: str):
+    """Arrays and metadata of a file written by this module; clear errors otherwise."""
+    path = os.fspath(path)
+    arrays, meta = read_npz(path, expected_format)
+    if meta.get("format") != expected_format:
+        raise ValueError(f"{path} holds format {meta.get('format')!r}, expected "
+                         f"{expected_format!r}")
+    return arrays, meta
+
+
+def _get(arrays: Dict[str, np.ndarray], key: str, path) -> np.ndarray:
+    try:
+        return arrays[key]
+    except KeyError:
+        raise ValueError(f"{path} is incomplete: entry {key!r} is missing") from None
+
+
+# -- parameters -----------------------------------------------------------------------------
+def _put_params(arrays, trainable, key: str, params: Sequence[gpflow.Parameter]) -> None:
+    """Store a list of same-shaped parameters stacked: values and raw variables."""
+    arrays[key] = np.stack([p.numpy() for p in params])
+    arrays[key + "_raw"] = np.stack([p.unconstrained_variable.numpy() for p in params])
+    trainable[key] = [bool(p.trainable) for p in params]
+
+
+def _get_params(params: Sequence[gpflow.Parameter], arrays, trainable, key: str, path) -> None:
+    values = _get(arrays, key, path)
+    raw = arrays.get(key + "_raw")
+    flags = trainable.get(key)
+    if len(values) != len(params):
+        raise ValueError(f"{path}: entry {key!r} holds {len(values)} values, expected "
+                         f"{len(params)}")
+    for i, p in enumerate(params):
+        if raw is not None and raw[i].shape == tuple(p.unconstrained_variable.shape):
+            # the exact stored variable: no round trip through the transform (a value on
+            # its bound, such as a noise variance at its floor, would not survive one)
+            p.unconstrained_variable.assign(raw[i])
+        else:
+            p.assign(values[i])
+        if flags is not None:
+            gpflow.set_trainable(p, bool(flags[i]))
+
+
+# -- components -----------------------------------------------------------------------------
+def _squash_name(squash):
+    if squash is None:
+        return None
+    for name, fn in _SQUASHES.items():
+        if squash is fn:
+            return name
+    raise TypeError(
+        f"cannot save a controller with squash function {squash!r}: only squash_sin, "
+        f"squash_sat or None can be stored"
+    )
+
+
+def _controller_spec(controller, arrays, trainable) -> dict:
+    kind = type(controller)
+    if kind is RbfController:
+        spec = dict(type="RbfController", state_dim=controller.state_dim,
+                    control_dim=controller.control_dim,
+                    num_basis_functions=controller.num_basis_functions,
+                    squash=_squash_name(controller.squash))
+        _put_params(arrays, trainable, "controller/centers", [controller.centers])
+        _put_params(arrays, trainable, "controller/targets", [controller.targets])
+        _put_params(arrays, trainable, "controller/lengthscales",
+                    [g.kernel.lengthscales for g in controller.models])
+        _put_params(arrays, trainable, "controller/variance",
+                    [g.kernel.variance for g in controller.models])
+        _put_params(arrays, trainable, "controller/noise",
+                    [g.likelihood.variance for g in controller.models])
+    elif kind is LinearController:
+        spec = dict(type="LinearController", state_dim=controller.state_dim,
+                    control_dim=controller.control_dim, squash=_squash_name(controller.squash))
+        _put_params(arrays, trainable, "controller/W", [controller.W])
+        _put_params(arrays, trainable, "controller/b", [controller.b])
+    else:
+        raise TypeError(
+            f"cannot save a controller of type {kind.__name__}: supported are RbfController "
+            f"and LinearController"
+        )
+    arrays["controller/max_action"] = np.asarray(controller.max_action, dtype=np.float64)
+    return spec
+
+
+def _build_controller(spec: dict, arrays, trainable, path):
+    kind = spec.get("type")
+    squash = spec.get("squash")
+    if squash is not None and squash not in _SQUASHES:
+        raise ValueError(f"{path}: unknown squash function {squash!r}")
+    squash = None if squash is None else _SQUASHES[squash]
+    max_action = _get(arrays, "controller/max_action", path)
+    if kind == "RbfController":
+        c = RbfController(spec["state_dim"], spec["control_dim"], spec["num_basis_functions"],
+                          max_action=max_action, squash=squash)
+        _get_params([c.centers], arrays, trainable, "controller/centers", path)
+        _get_params([c.targets], arrays, trainable, "controller/targets", path)
+        _get_params([g.kernel.lengthscales for g in c.models], arrays, trainable,
+                    "controller/lengthscales", path)
+        _get_params([g.kernel.variance for g in c.models], arrays, trainable,
+                    "controller/variance", path)
+        _get_params([g.likelihood.variance for g in c.models], arrays, trainable,
+                    "controller/noise", path)
+    elif kind == "LinearController":
+        c = LinearController(spec["state_dim"], spec["control_dim"], max_action=max_action,
+                             squash=squash)
+        _get_params([c.W], arrays, trainable, "controller/W", path)
+        _get_params([c.b], arrays, trainable, "controller/b", path)
+    else:
+        raise ValueError(f"{path}: unknown controller type {kind!r}")
+    return c
+
+
+def _reward_spec(reward, arrays, prefix: str) -> dict:
+    kind = type(reward)
+    if kind is ExponentialReward:
+        arrays[prefix + "W"] = reward.W.numpy()
+        arrays[prefix + "t"] = reward.t.numpy()
+        return dict(type="ExponentialReward", state_dim=reward.state_dim)
+    if kind is LinearReward:
+        arrays[prefix + "W"] = reward.W.numpy()
+        return dict(type="LinearReward", state_dim=reward.state_dim)
+    if kind is CombinedRewards:
+        arrays[prefix + "coefs"] = reward.coefs.numpy()
+        parts = [_reward_spec(r, arrays, f"{prefix}{i}/")
+                 for i, r in enumerate(reward.base_rewards)]
+        return dict(type="CombinedRewards", state_dim=reward.state_dim, rewards=parts)
+    if kind is CartPoleReward:
+        return dict(type="CartPoleReward", pendulum_length=reward.pendulum_length,
+                    width=reward.width)
+    raise TypeError(
+        f"cannot save a reward of type {kind.__name__}: supported are ExponentialReward, "
+        f"LinearReward, CombinedRewards and CartPoleReward"
+    )
+
+
+def _build_reward(spec: dict, arrays, prefix: str, path):
+    kind = spec.get("type")
+    if kind == "ExponentialReward":
+        return ExponentialReward(spec["state_dim"], W=_get(arrays, prefix + "W", path),
+                                 t=_get(arrays, prefix + "t", path))
+    if kind == "LinearReward":
+        return LinearReward(spec["state_dim"], W=_get(arrays, prefix + "W", path))
+    if kind == "CombinedRewards":
+        parts = [_build_reward(s, arrays, f"{prefix}{i}/", path)
+                 for i, s in enumerate(spec["rewards"])]
+        return CombinedRewards(spec["state_dim"], parts, coefs=_get(arrays, prefix + "coefs", path))
+    if kind == "CartPoleReward":
+        return CartPoleReward(pendulum_length=spec["pendulum_length"], width=spec["width"])
+    raise ValueError(f"{path}: unknown reward type {kind!r}")
+
+
+# Constructor settings of the dynamics model that are stored and restored.
+_GP_SETTINGS = ("noise_floor", "max_snr", "max_lengthscale_ratio")
+
+
+def _gp_params(gp):
+    """The stored parameter lists of a dynamics model, by key."""
+    out = {"gp/lengthscales": [m.kernel.lengthscales for m in gp.models],
+           "gp/variance": [m.kernel.variance for m in gp.models],
+           "gp/noise": [m.likelihood.variance for m in gp.models]}
+    if isinstance(gp, SMGPR):
+        out["gp/Z"] = [gp.inducing_variable.Z]
+    return out
+
+
+def _gp_spec(gp, arrays, trainable) -> dict:
+    kind = type(gp)
+    if kind not in (MGPR, SMGPR):
+        raise TypeError(f"cannot save a dynamics model of type {kind.__name__}: supported "
+                        f"are MGPR and SMGPR")
+    for key, params in _gp_params(gp).items():
+        _put_params(arrays, trainable, key, params)
+    spec = dict(type=kind.__name__)
+    spec.update({k: float(getattr(gp, k)) for k in _GP_SETTINGS if hasattr(gp, k)})
+    if kind is SMGPR:
+        spec["num_induced_points"] = gp.num_induced_points
+    return spec
+
+
+def restore_dynamics(gp, arrays, trainable, path) -> None:
+    """Assign the stored hyperparameters (and inducing inputs) to the dynamics model."""
+    for key, params in _gp_params(gp).items():
+        _get_params(params, arrays, trainable, key, path)
+
+
+# -- agents ---------------------------------------------------------------------------------
+def agent_arrays(agent) -> Dict[str, np.ndarray]:
+    """Everything :func:`read_agent` needs to rebuild ``agent``, as named arrays.
+
+    Stored: raw data ``X [N, D + U]``, ``Y [N, D]``; GP hyperparameters (lengthscales
+    [E, F + U], signal and noise variances [E], inducing inputs Z [M, F + U] for a sparse
+    model) and settings; controller type, settings and parameters; reward type and
+    parameters; horizon, ``m_init`` [1, D], ``S_init`` [D, D], angle indices,
+    ``num_induced_points`` and ``policy_input_noise``. Raises :class:`TypeError` for
+    components that cannot be stored (custom controllers, rewards, squash functions or
+    dynamics models).
+    """
+    arrays: Dict[str, np.ndarray] = {}
+    trainable: Dict[str, List[bool]] = {}
+    X, Y = agent.data
+    arrays["data/X"], arrays["data/Y"] = X, Y
+    arrays["m_init"] = agent.m_init
+    arrays["S_init"] = agent.S_init
+    meta = dict(
+        format=AGENT_FORMAT, version=AGENT_VERSION, pilco_version=__version__,
+        state_dim=agent.state_dim, control_dim=agent.control_dim, horizon=agent.horizon,
+        angle_indices=list(agent.angle_indices),
+        num_induced_points=(None if agent.num_induced_points is None
+                            else int(agent.num_induced_points)),
+        policy_input_noise=bool(agent.policy_input_noise),
+        controller=_controller_spec(agent.controller, arrays, trainable),
+        reward=_reward_spec(agent.reward, arrays, "reward/"),
+        gp=_gp_spec(agent.mgpr, arrays, trainable),
+        trainable=trainable,
+    )
+    arrays[META_KEY] = np.array(json.dumps(meta))
+    return arrays
+
+
+def read_agent(path) -> Tuple[Dict[str, Any], Any]:
+    """Read an agent file: the ``PILCO`` constructor's keyword arguments, and a function
+    that assigns the stored dynamics-model values to the rebuilt agent's ``mgpr``."""
+    arrays, meta = _read_npz(path, AGENT_FORMAT)
+    version = meta.get("version")
+    if not isinstance(version, int) or version > AGENT_VERSION:
+        raise ValueError(f"{path} has agent format version {version!r}; this pilco "
+                         f"({__version__}) reads versions up to {AGENT_VERSION}")
+    trainable = meta.get("trainable", {})
+    spec = meta["gp"]
+    if spec.get("type") not in ("MGPR", "SMGPR"):
+        raise ValueError(f"{path}: unknown dynamics model type {spec.get('type')!r}")
+    accepted = inspect.signature(MGPR.__init__).parameters
+    kwargs = dict(
+        data=(_get(arrays, "data/X", path), _get(arrays, "data/Y", path)),
+        controller=_build_controller(meta["controller"], arrays, trainable, path),
+        reward=_build_reward(meta["reward"], arrays, "reward/", path),
+        horizon=meta["horizon"], m_init=_get(arrays, "m_init", path),
+        S_init=_get(arrays, "S_init", path), angle_indices=meta["angle_indices"],
+        num_induced_points=meta["num_induced_points"],
+        policy_input_noise=meta["policy_input_noise"],
+        model_options={k: float(spec[k]) for k in _GP_SETTINGS if k in spec and k in accepted},
+    )
+    return kwargs, lambda gp: restore_dynamics(gp, arrays, trainable, path)
+
+
+# -- policies -------------------------------------------------------------------------------
+def _deterministic_jitter() -> float:
+    """Variance that moment matching adds to a deterministic GP's output (the RBF policy)."""
+    return float(inspect.signature(moments.moment_match).parameters["deterministic_jitter"].default)
+
+
+def policy_arrays(controller, state_dim: int,
+                  angle_indices: Sequence[int]) -> Dict[str, np.ndarray]:
+    """The policy file of ``controller`` as named arrays (the layout is described by
+    :func:`pilco.persistence.export_policy`)."""
+    angle_indices = [int(a) for a in angle_indices]
+    squash = _SQUASH_KIND[_squash_name(controller.squash)]
+    arrays: Dict[str, np.ndarray] = dict(
+        state_dim=np.array(state_dim, dtype=np.int64),
+        angle_indices=np.array(angle_indices, dtype=np.int64).reshape(-1),
+        max_action=np.asarray(controller.max_action, dtype=np.float64).reshape(-1),
+    )
+    if type(controller) is RbfController:
+        kind = "rbf"
+        fact = controller.factorize()
+        ell, sf2, sn2 = (t.numpy() for t in controller.hyperparameters())
+        arrays.update(
+            centers=controller.centers.numpy(), targets=controller.targets.numpy(),
+            beta=fact.beta.numpy(), lengthscales=ell, variance=sf2, noise=sn2,
+            unsquashed_variance=np.array(_deterministic_jitter()),
+        )
+        if not np.all(np.isfinite(arrays["beta"])):
+            raise ValueError("the policy's weights (beta) are not finite; cannot export")
+    elif type(controller) is LinearController:
+        kind = "linear"
+        arrays.update(W=controller.W.numpy(), b=controller.b.numpy(),
+                      unsquashed_variance=np.array(0.0))
+    else:
+        raise TypeError(f"cannot export a controller of type {type(controller).__name__}: "
+                        f"supported are RbfController and LinearController")
+    meta = dict(format=POLICY_FORMAT, version=POLICY_VERSION, pilco_version=__version__,
+                kind=kind, squash=squash, state_dim=state_dim,
+                control_dim=controller.control_dim, feature_dim=controller.state_dim,
+                angle_indices=angle_indices)
+    arrays[META_KEY] = np.array(json.dumps(meta))
+    return arrays
+
+
+# -- files ----------------------------------------------------------------------------------
+def save_agent(agent, path) -> str:
+    """Write :func:`agent_arrays` of ``agent`` to ``path`` atomically; returns the path."""
+    written = write_npz_atomic(path, agent_arrays(agent))
+    logger.info("saved PILCO agent (%d transitions) to %s", len(agent.data[0]), written)
+    return written
+
+
+def load_agent(agent_class, path):
+    """Rebuild the agent stored at ``path`` as an instance of ``agent_class`` (PILCO)."""
+    kwargs, restore = read_agent(path)
+    agent = agent_class(**kwargs)
+    restore(agent.mgpr)
+    logger.info("loaded PILCO agent from %s", path)
+    return agent
+
+
+def export_policy(controller, path, state_dim: int, angle_indices: Sequence[int]) -> str:
+    """Write :func:`policy_arrays` to ``path`` atomically; returns the path written."""
+    written = write_npz_atomic(path, policy_arrays(controller, state_dim, angle_indices))
+    logger.info("exported %s policy to %s", type(controller).__name__, written)
+    return written
