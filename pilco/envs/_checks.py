@@ -12,20 +12,20 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "check_choice",
-    "check_horizon",
-    "check_mapping",
-    "check_real",
-    "check_render_mode",
-    "check_render_size",
-    "check_reset_options",
-    "check_seed",
-    "check_std",
-    "check_vector",
+    "choice",
+    "horizon",
+    "mapping",
+    "real",
+    "render_mode",
+    "render_size",
+    "reset_options",
+    "seed",
+    "std",
+    "vector",
 ]
 
 
-def check_vector(value: Any, size: int, name: str, *, layout: str = "") -> np.ndarray:
+def vector(value: Any, size: int, name: str, *, layout: str = "") -> np.ndarray:
     """Convert ``value`` to a new finite float64 array of shape ``(size,)``.
 
     Args:
@@ -51,7 +51,7 @@ def check_vector(value: Any, size: int, name: str, *, layout: str = "") -> np.nd
     return arr.copy()
 
 
-def check_std(value: Any, size: int, name: str) -> np.ndarray:
+def std(value: Any, size: int, name: str) -> np.ndarray:
     """Standard deviations: a scalar or shape ``(size,)``, finite and ``>= 0``, returned
     as a new float64 array of shape ``(size,)``."""
     try:
@@ -66,18 +66,21 @@ def check_std(value: Any, size: int, name: str) -> np.ndarray:
     return arr
 
 
-def check_real(value: Any, name: str, *, allow_zero: bool) -> float:
-    """A finite real number that is ``> 0`` (or ``>= 0`` with ``allow_zero``), as ``float``.
+def real(value: Any, name: str, *, allow_zero: bool, allow_negative: bool = False) -> float:
+    """A finite real number, as ``float``: ``> 0``, or ``>= 0`` with ``allow_zero``, or of
+    any sign with ``allow_negative``.
 
     Raises:
         TypeError: not a real number (``bool`` is refused too).
-        ValueError: NaN, infinite, negative, or zero when ``allow_zero`` is false.
+        ValueError: NaN, infinite, or of a sign not allowed.
     """
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
     value = float(value)
     if not np.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value}")
+    if allow_negative:
+        return value
     if value < 0 or (value == 0 and not allow_zero):
         raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {value}")
     return value
@@ -91,47 +94,47 @@ def _check_int(value: Any, name: str, minimum: int, *, kind: str = "an int") -> 
     return int(value)
 
 
-def check_horizon(max_episode_steps: Any) -> int | None:
+def horizon(max_episode_steps: Any) -> int | None:
     """``max_episode_steps``: a positive int, or ``None`` (no internal limit)."""
     if max_episode_steps is None:
         return None
     return _check_int(max_episode_steps, "max_episode_steps", 1, kind="an int or None")
 
 
-def check_seed(seed: Any) -> int | None:
+def seed(seed: Any) -> int | None:
     """``reset(seed=...)``: ``None`` or an int ``>= 0`` (NumPy integers are converted)."""
     if seed is None:
         return None
     return _check_int(seed, "seed", 0, kind="an int or None")
 
 
-def check_render_size(width: Any, height: Any) -> tuple[int, int]:
+def render_size(width: Any, height: Any) -> tuple[int, int]:
     """``render_width`` and ``render_height``: ints of at least 16 pixels."""
     return _check_int(width, "render_width", 16), _check_int(height, "render_height", 16)
 
 
-def check_render_mode(render_mode: Any, modes: Collection[str]) -> str | None:
+def render_mode(render_mode: Any, modes: Collection[str]) -> str | None:
     """``render_mode``: ``None`` or one of ``modes``."""
     if render_mode is not None and render_mode not in modes:
         raise ValueError(f"render_mode must be None or one of {list(modes)}, got {render_mode!r}")
     return render_mode
 
 
-def check_choice(value: Any, name: str, choices: Collection[str]) -> str:
+def choice(value: Any, name: str, choices: Collection[str]) -> str:
     """``value`` must be one of the strings ``choices``."""
     if not isinstance(value, str) or value not in choices:
         raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
     return value
 
 
-def check_mapping(value: Any, name: str) -> Mapping:
+def mapping(value: Any, name: str) -> Mapping:
     """``value`` must be a mapping (e.g. a dict)."""
     if not isinstance(value, Mapping):
         raise TypeError(f"{name} must be a mapping, got {type(value).__name__}")
     return value
 
 
-def check_reset_options(options: Any, valid: Collection[str]) -> dict[str, Any]:
+def reset_options(options: Any, valid: Collection[str]) -> dict[str, Any]:
     """``reset(options=...)``: ``None`` or a dict whose keys are all in ``valid``.
 
     Returns:

@@ -19,15 +19,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from pilco.envs._checks import (
-    check_horizon,
-    check_real,
-    check_render_mode,
-    check_render_size,
-    check_reset_options,
-    check_seed,
-    check_std,
-)
+from pilco.envs import _checks as check
 from pilco.envs.cartpole_draw import draw_cartpole
 from pilco.envs.cartpole_physics import CartPolePhysics
 
@@ -97,7 +89,7 @@ class CartPoleSwingUp(CartPolePhysics, gymnasium.Env):
         atol: float = 1e-10,
     ) -> None:
         gymnasium.Env.__init__(self)
-        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
+        self.render_mode = check.render_mode(render_mode, self.metadata["render_modes"])
         CartPolePhysics.__init__(
             self,
             cart_mass=cart_mass,
@@ -110,13 +102,13 @@ class CartPoleSwingUp(CartPolePhysics, gymnasium.Env):
             rtol=rtol,
             atol=atol,
         )
-        self.max_force = check_real(max_force, "max_force", allow_zero=False)
-        self.noise_std = check_real(noise_std, "noise_std", allow_zero=True)
+        self.max_force = check.real(max_force, "max_force", allow_zero=False)
+        self.noise_std = check.real(noise_std, "noise_std", allow_zero=True)
         self.start_mean = self._as_state(np.zeros(4) if start_mean is None else start_mean,
                                          "start_mean")
-        self.start_std = check_std(start_std, 4, "start_std")
-        self.max_episode_steps = check_horizon(max_episode_steps)
-        self.render_width, self.render_height = check_render_size(render_width, render_height)
+        self.start_std = check.std(start_std, 4, "start_std")
+        self.max_episode_steps = check.horizon(max_episode_steps)
+        self.render_width, self.render_height = check.render_size(render_width, render_height)
 
         self.action_space = spaces.Box(
             low=-self.max_force, high=self.max_force, shape=(1,), dtype=np.float64
@@ -165,8 +157,8 @@ class CartPoleSwingUp(CartPolePhysics, gymnasium.Env):
             ``(observation of shape (4,), info)``; ``info["tip_distance"]`` and
             ``info["state"]`` (true state, shape ``(4,)``).
         """
-        super().reset(seed=check_seed(seed))
-        options = check_reset_options(options, ("state",))
+        super().reset(seed=check.seed(seed))
+        options = check.reset_options(options, ("state",))
         if "state" in options:
             self.state = self._as_state(options["state"], "options['state']")
         else:

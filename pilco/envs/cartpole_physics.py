@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from pilco.envs._checks import check_real, check_vector
+from pilco.envs import _checks as check
 
 __all__ = ["CartPolePhysics"]
 
@@ -67,21 +67,21 @@ class CartPolePhysics:
         rtol: float,
         atol: float,
     ) -> None:
-        self.cart_mass = check_real(cart_mass, "cart_mass", allow_zero=False)
-        self.pole_mass = check_real(pole_mass, "pole_mass", allow_zero=False)
-        self.pole_length = check_real(pole_length, "pole_length", allow_zero=False)
-        self.friction = check_real(friction, "friction", allow_zero=True)
-        self.gravity = check_real(gravity, "gravity", allow_zero=True)
-        self.dt = check_real(dt, "dt", allow_zero=False)
-        self.cost_width = check_real(cost_width, "cost_width", allow_zero=False)
-        self.rtol = check_real(rtol, "rtol", allow_zero=False)
-        self.atol = check_real(atol, "atol", allow_zero=False)
+        self.cart_mass = check.real(cart_mass, "cart_mass", allow_zero=False)
+        self.pole_mass = check.real(pole_mass, "pole_mass", allow_zero=False)
+        self.pole_length = check.real(pole_length, "pole_length", allow_zero=False)
+        self.friction = check.real(friction, "friction", allow_zero=True)
+        self.gravity = check.real(gravity, "gravity", allow_zero=True)
+        self.dt = check.real(dt, "dt", allow_zero=False)
+        self.cost_width = check.real(cost_width, "cost_width", allow_zero=False)
+        self.rtol = check.real(rtol, "rtol", allow_zero=False)
+        self.atol = check.real(atol, "atol", allow_zero=False)
         self.state: np.ndarray | None = None
 
     @staticmethod
     def _as_state(value: Any, name: str) -> np.ndarray:
         """Convert ``value`` to a finite float64 array of shape ``(4,)``."""
-        return check_vector(value, 4, name, layout=_STATE_LAYOUT)
+        return check.vector(value, 4, name, layout=_STATE_LAYOUT)
 
     def _require_state(self) -> np.ndarray:
         if self.state is None:
@@ -130,7 +130,9 @@ class CartPolePhysics:
             State after ``duration`` seconds, shape ``(4,)``.
         """
         y0 = self._as_state(state, "state")
-        duration = self.dt if duration is None else check_real(duration, "duration", allow_zero=False)
+        if duration is None:
+            duration = self.dt
+        duration = check.real(duration, "duration", allow_zero=False)
         sol = solve_ivp(
             lambda _t, y: self.state_derivative(y, force),
             (0.0, duration),
