@@ -122,7 +122,9 @@ def render_mode(render_mode: Any, modes: Collection[str]) -> str | None:
 
 def choice(value: Any, name: str, choices: Collection[str]) -> str:
     """``value`` must be one of the strings ``choices``."""
-    if not isinstance(value, str) or value not in choices:
+    if not isinstance(value, str):
+        raise TypeError(f"{name} must be a string, one of {list(choices)}, got {value!r}")
+    if value not in choices:
         raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
     return value
 
