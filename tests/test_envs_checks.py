@@ -53,7 +53,8 @@ RESET_BAD = [
 CARTPOLE_RESET_BAD = RESET_BAD + [
     ({"options": {"state": [0.0, 0.0, 0.0]}}, ValueError, r"options\['state'\]"),
     ({"options": {"state": [0.0, NAN, 0.0, 0.0]}}, ValueError, "finite"),
-    ({"options": {"state": [0, 0, 0, 0], "qpos": 1}}, ValueError, r"Unknown reset options \['qpos'\]"),
+    ({"options": {"state": [0, 0, 0, 0], "qpos": 1}}, ValueError,
+     r"Unknown reset options \['qpos'\]"),
 ]
 
 
