@@ -7,6 +7,12 @@ Importing this package registers (once; importing again is harmless):
 - ``pilco/FetchJointReacherDamaged-v0``: the same with the elbow forced to 0 rad
   (``damaged_joints=("elbow_flex",)``, ``damage_mode="zero"``).
 
+Constructor arguments pass through ``gymnasium.make``; e.g. the arm of the paper's
+published scripts (commanded joint angles in the state, elbow healthy at reset and
+0 rad from the first step on)::
+
+    gymnasium.make(FETCH_DAMAGED_ID, joint_state="commanded", damage_mode="zero_on_step")
+
 The episode horizon of the registered ids is enforced by gymnasium's ``TimeLimit``
 wrapper (``env.spec.max_episode_steps``; override with
 ``gymnasium.make(id, max_episode_steps=N)``); the envs' own limit is disabled there.

@@ -1,0 +1,75 @@
+"""Damaged joints of the Fetch arm: which joints, how they fail, what they are forced to.
+
+Modes (the agent is not told; the observation keeps its form):
+
+- ``"zero"``: the joints are forced to 0 rad at reset and at every step whatever the
+  command;
+- ``"zero_on_step"`` (the published scripts' unresponsive arm): the reset leaves the joints
+  at the start pose, and every step forces them to 0 rad, so the first transition jumps
+  from the healthy pose to the straightened joint;
+- ``"stuck"``: the joints keep the angle they had when the damage happened (the start
+  pose of each episode, or the current angle when damaged mid-run).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pilco.envs import _checks as check
+from pilco.envs.fetch_model import SHORT_NAMES, resolve_joints
+
+__all__ = ["DAMAGE_MODES", "JointDamage"]
+
+DAMAGE_MODES = ("zero", "zero_on_step", "stuck")
+
+
+class JointDamage:
+    """The damaged arm joints and the rule that overrides their commanded angles.
+
+    Args:
+        joints: joint name or names (short or full), none for a healthy arm.
+        mode: one of :data:`DAMAGE_MODES`.
+    """
+
+    def __init__(self, joints: Any = (), mode: str = "zero") -> None:
+        self.joints: tuple[int, ...] = ()
+        self.mode = "zero"
+        self._stuck = np.zeros(0)
+        self.replace(joints, mode, np.zeros(len(SHORT_NAMES)))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Short names of the damaged joints."""
+        return tuple(SHORT_NAMES[i] for i in self.joints)
+
+    def replace(self, joints: Any, mode: str, current: np.ndarray) -> None:
+        """Damage ``joints`` instead of the previous ones; ``"stuck"`` joints hold their
+        angles in ``current`` (7,)."""
+        damaged = resolve_joints(joints)
+        self.mode = check.choice(mode, "damage_mode", DAMAGE_MODES)
+        self.joints = damaged
+        self._stuck = current[list(damaged)] if damaged else np.zeros(0)
+
+    def clear(self) -> None:
+        """Repair all joints."""
+        self.joints = ()
+        self._stuck = np.zeros(0)
+
+    def _force(self, q: np.ndarray) -> np.ndarray:
+        if self.joints:
+            idx = list(self.joints)
+            q[idx] = self._stuck if self.mode == "stuck" else 0.0
+        return q
+
+    def at_reset(self, q: np.ndarray) -> np.ndarray:
+        """Angles ``q`` (7,) of a new episode's start pose after the damage (in place)."""
+        if self.mode == "stuck" and self.joints:
+            self._stuck = q[list(self.joints)].copy()
+        if self.mode == "zero_on_step":
+            return q
+        return self._force(q)
+
+    def at_step(self, q: np.ndarray) -> np.ndarray:
+        """Commanded angles ``q`` (7,) of a step after the damage (in place)."""
+        return self._force(q)
