@@ -376,18 +376,20 @@ def write_report(args: argparse.Namespace, specs: Sequence[RunSpec],
     per_setting: Dict[str, List[Dict[str, Any]]] = {d["label"]: [] for d in described}
     run_rows = []
     for spec in specs:
-        summary = runs.read_json(os.path.join(spec.directory, runs.SUMMARY))
         row = {"setting": spec.label, "seed": spec.seed, "directory": spec.directory}
+        summary = None
         if spec in failed:
             row.update(status="failed", error=failed[spec]["error"])
         elif spec in not_run:
             row["status"] = "not_run"
-        elif runs.summary_complete(summary):
+        else:
+            summary = runs.finished_summary(spec)
+        if summary is not None:
             per_setting[spec.label].append(summary)
             row.update(status="finished" if spec in now else "skipped",
                        success=aggregate.run_success(summary),
                        solved_at_episode=summary.get("solved_at_episode"))
-        else:
+        elif "status" not in row:
             row["status"] = "missing"
         run_rows.append(row)
     results = {}

@@ -130,16 +130,19 @@ def summary_complete(summary: Optional[Mapping[str, Any]]) -> bool:
 
 def finished_summary(spec: RunSpec) -> Optional[Dict[str, Any]]:
     """The complete summary already in ``spec.directory`` (a finished run to skip), or
-    None. Raises ValueError when the directory holds a run of another task, seed or
+    None: not for a summary with ``complete: false`` or no episode, nor when the
+    directory's ``sweep-run.json`` records a failed run. Raises ValueError when the directory holds a run of another task, seed or
     flags (the sweep would mix settings)."""
     summary = read_json(os.path.join(spec.directory, SUMMARY))
-    if not summary_complete(summary):
+    if not summary_complete(summary) or not summary.get("episodes"):
         return None
+    record = read_json(os.path.join(spec.directory, RUN_RECORD))
+    if record is not None and record.get("status") != "finished":
+        return None  # a failed run's own summary is no result
     if summary.get("task") not in (None, spec.task) or \
             summary.get("seed") not in (None, spec.seed):
         raise ValueError(f"{spec.directory} holds a run of task {summary.get('task')!r} "
                          f"seed {summary.get('seed')!r}, not {spec.task!r} seed {spec.seed}")
-    record = read_json(os.path.join(spec.directory, RUN_RECORD))
     if record is not None and list(record.get("flags", [])) != list(spec.flags):
         raise ValueError(f"{spec.directory} holds a run made with the flags "
                          f"{' '.join(record.get('flags', [])) or '(none)'}, not "
