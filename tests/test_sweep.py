@@ -233,12 +233,24 @@ def test_resume_refuses_a_directory_of_other_flags(tmp_path):
 
     write_json_atomic(str(tmp_path / runs.SUMMARY), summary(0))
     assert runs.finished_summary(spec)["seed"] == 0
-    write_json_atomic(str(tmp_path / runs.RUN_RECORD), {"flags": ["--horizon", "6"]})
+    write_json_atomic(str(tmp_path / runs.RUN_RECORD),
+                      {"flags": ["--horizon", "6"], "status": "finished"})
     with pytest.raises(ValueError, match="--horizon 6"):
         runs.finished_summary(spec)
-    write_json_atomic(str(tmp_path / runs.RUN_RECORD), {"flags": ["--horizon", "5"]})
+    write_json_atomic(str(tmp_path / runs.RUN_RECORD),
+                      {"flags": ["--horizon", "5"], "status": "finished"})
     write_json_atomic(str(tmp_path / runs.SUMMARY), {**summary(0), "complete": False})
     assert runs.finished_summary(spec) is None  # an interrupted run is run again
+    for status in ("pending", "failed", "interrupted"):  # what such a run left behind
+        write_json_atomic(str(tmp_path / runs.SUMMARY), summary(0))
+        write_json_atomic(str(tmp_path / runs.RUN_RECORD),
+                          {"flags": ["--horizon", "5"], "status": status})
+        assert runs.finished_summary(spec) is None
+    write_json_atomic(str(tmp_path / runs.RUN_RECORD),
+                      {"flags": ["--horizon", "5"], "status": "finished"})
+    assert runs.finished_summary(spec)["seed"] == 0
+    write_json_atomic(str(tmp_path / runs.SUMMARY), {**summary(0), "episodes": []})
+    assert runs.finished_summary(spec) is None
     write_json_atomic(str(tmp_path / runs.SUMMARY), summary(1))
     with pytest.raises(ValueError, match="seed 1"):
         runs.finished_summary(spec)

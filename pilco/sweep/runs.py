@@ -131,14 +131,16 @@ def summary_complete(summary: Optional[Mapping[str, Any]]) -> bool:
 def finished_summary(spec: RunSpec) -> Optional[Dict[str, Any]]:
     """The complete summary already in ``spec.directory`` (a finished run to skip), or
     None: not for a summary with ``complete: false`` or no episode, nor when the
-    directory's ``sweep-run.json`` records a failed run. Raises ValueError when the directory holds a run of another task, seed or
+    directory's ``sweep-run.json`` records a run that did not finish (pending, failed,
+    interrupted). A summary without ``sweep-run.json`` (a run started by hand) counts.
+    Raises ValueError when the directory holds a run of another task, seed or
     flags (the sweep would mix settings)."""
     summary = read_json(os.path.join(spec.directory, SUMMARY))
     if not summary_complete(summary) or not summary.get("episodes"):
         return None
     record = read_json(os.path.join(spec.directory, RUN_RECORD))
     if record is not None and record.get("status") != "finished":
-        return None  # a failed run's own summary is no result
+        return None  # what a stopped or failed run left is no result
     if summary.get("task") not in (None, spec.task) or \
             summary.get("seed") not in (None, spec.seed):
         raise ValueError(f"{spec.directory} holds a run of task {summary.get('task')!r} "
@@ -302,7 +304,9 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
         with _sigterm_as_interrupt():
             try:
                 for spec in specs:
-                    os.makedirs(spec.directory, exist_ok=True)
+                    # until the driver records it finished, whatever the run leaves in
+                    # its directory (a summary written when it was stopped) is no result
+                    _record(spec, status="pending")
                     pending[remote.remote(spec, cpus_per_run)] = spec
                 while pending:
                     done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
@@ -336,6 +340,9 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
                 with contextlib.suppress(Exception, KeyboardInterrupt):
                     ray.wait(list(pending), num_returns=len(pending), timeout=10.0)
                 outcome.not_run.extend(pending.values())
+                for spec in pending.values():
+                    with contextlib.suppress(OSError):
+                        _record(spec, status="interrupted")
     finally:
         bar.close()
     return outcome
