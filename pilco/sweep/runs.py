@@ -32,8 +32,9 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from pilco.files import write_json_atomic
 
-__all__ = ["RunSpec", "RunFailed", "SweepOutcome", "THREAD_VARIABLES", "thread_environment",
-           "finished_summary", "read_json", "summary_complete", "execute_run", "execute", "SUMMARY", "RUN_RECORD"]
+__all__ = ["RunSpec", "RunFailed", "SweepOutcome", "THREAD_VARIABLES", "SUMMARY", "RUN_RECORD",
+           "thread_environment", "read_json", "summary_complete", "finished_summary",
+           "execute_run", "execute"]
 
 logger = logging.getLogger(__name__)
 
