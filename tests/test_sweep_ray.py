@@ -26,7 +26,7 @@ def local_ray():
         ray.shutdown()
 
 
-COMMAND = ["cartpole", "--seeds", "0-1", "--no-progress", "--max-retries", "1",
+COMMAND = ["cartpole", "--seeds", "0-1", "--no-progress", "--max-retries", "0",
            # max_force=-1 passes the flag check, the task rejects it when it starts
            "--grid", "max_force=10,-1"]
 OK, BAD = "max_force=10", "max_force=-1"
@@ -71,7 +71,7 @@ def test_a_failing_run_is_reported_with_its_error_and_the_others_kept(sweep):
     assert sorted((f["setting"], f["seed"], f["returncode"]) for f in report["failures"]) == [
         (BAD, 0, 1), (BAD, 1, 1)]
     for failure in report["failures"]:
-        assert failure["attempts"] == 2
+        assert failure["attempts"] == 1
         assert "exit code 1" in failure["error"]
         assert "max_force must be > 0" in failure["stderr_tail"]
     assert load(out / BAD / "seed-0" / "sweep-run.json")["status"] == "failed"
@@ -109,3 +109,19 @@ def test_a_finished_sweep_starts_no_run(sweep, monkeypatch):
     good_only = [a if a != "max_force=10,-1" else "max_force=10" for a in COMMAND]
     assert cli.main([*good_only, "--output", str(out), "--no-figures", *TINY]) == 0
     assert [r["status"] for r in load(out / "sweep.json")["runs"]] == ["skipped", "skipped"]
+
+
+def test_a_failing_process_is_retried(tmp_path, local_ray):
+    # a task pilco.tasks does not know: the process exits with status 2 at once
+    spec = runs.RunSpec("no_such_task", 3, "default", (), str(tmp_path / "seed-3"))
+    outcome = runs.execute([spec], max_retries=2, progress=False)
+    assert outcome.finished == [] and not outcome.interrupted
+    [(failed, failure)] = outcome.failed
+    assert failed == spec
+    assert failure["attempts"] == 3
+    assert failure["returncode"] == 2
+    assert "exit code 2" in failure["error"]
+    with open(tmp_path / "seed-3" / runs.ATTEMPTS, encoding="utf-8") as fh:
+        assert len(fh.readlines()) == 3
+    record = load(tmp_path / "seed-3" / runs.RUN_RECORD)
+    assert (record["status"], record["attempts"]) == ("failed", 3)

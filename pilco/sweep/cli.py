@@ -322,6 +322,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         argv, extra = argv[:cut], argv[cut + 1:]
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.command = ["python", "-m", "pilco.sweep", *argv, *(["--", *extra] if extra else [])]
     _configure_logging(args.log_level)
     try:
         specs, described = plan(args, extra)
@@ -337,13 +338,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     outcome = runs.SweepOutcome()
     try:
         if todo:
-            started, ray_seconds = _start_ray(args)
-            from tqdm.contrib.logging import logging_redirect_tqdm
+            try:
+                started, ray_seconds = _start_ray(args)
+            except KeyboardInterrupt:
+                outcome = runs.SweepOutcome(not_run=list(todo), interrupted=True)
+            else:
+                from tqdm.contrib.logging import logging_redirect_tqdm
 
-            with logging_redirect_tqdm():
-                outcome = runs.execute(todo, cpus_per_run=args.cpus_per_run,
-                                       max_retries=args.max_retries,
-                                       progress=not args.no_progress, on_result=_on_result)
+                with logging_redirect_tqdm():
+                    outcome = runs.execute(todo, cpus_per_run=args.cpus_per_run,
+                                           max_retries=args.max_retries,
+                                           progress=not args.no_progress,
+                                           on_result=_on_result)
     finally:
         if started:
             import ray
@@ -402,6 +408,7 @@ def write_report(args: argparse.Namespace, specs: Sequence[RunSpec],
             not_run=sum(r["status"] in ("not_run", "missing") for r in rows))
     report = {
         "task": args.task,
+        "command": list(getattr(args, "command", [])),
         "seeds": sorted({s.seed for s in specs}),
         "settings": list(described),
         "extra_flags": list(extra),

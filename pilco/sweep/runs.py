@@ -33,7 +33,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 from pilco.files import write_json_atomic
 
 __all__ = ["RunSpec", "RunFailed", "SweepOutcome", "THREAD_VARIABLES", "SUMMARY", "RUN_RECORD",
-           "thread_environment", "read_json", "summary_complete", "finished_summary",
+           "ATTEMPTS", "thread_environment", "read_json", "summary_complete", "finished_summary",
            "execute_run", "execute"]
 
 logger = logging.getLogger(__name__)
@@ -49,6 +49,9 @@ THREAD_VARIABLES = ("TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS", "OMP_NUM
 
 #: lines of a run's standard error kept in the failure report
 TAIL_LINES = 20
+
+#: one line per attempt of a run (the driver clears it when it submits the run)
+ATTEMPTS = "attempts.log"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,17 +79,18 @@ class RunSpec:
 
 class RunFailed(Exception):
     """A run's process failed: exit code ``returncode``, last lines of its standard
-    error ``stderr_tail``."""
+    error ``stderr_tail``, ``attempt`` (1 for the first) as counted on that node."""
 
     def __init__(self, message: str, returncode: Optional[int] = None,
-                 stderr_tail: str = ""):
+                 stderr_tail: str = "", attempt: Optional[int] = None):
         super().__init__(message)
         self.message = message
         self.returncode = returncode
         self.stderr_tail = stderr_tail
+        self.attempt = attempt
 
     def __reduce__(self):  # keep the fields when Ray pickles the exception
-        return (type(self), (self.message, self.returncode, self.stderr_tail))
+        return (type(self), (self.message, self.returncode, self.stderr_tail, self.attempt))
 
     def __str__(self) -> str:
         return self.message + (f"\n{self.stderr_tail}" if self.stderr_tail else "")
@@ -205,11 +209,16 @@ def execute_run(spec: RunSpec, threads: int = 1) -> Dict[str, Any]:
     "stdout_tail", "stderr_tail", "node", "directory", "seconds", "returncode"}``.
 
     Its standard output and error go to ``stdout.log`` and ``stderr.log`` in the run
-    directory. Raises :class:`RunFailed` when the process exits non-zero or leaves no
+    directory, a line per attempt to ``attempts.log``. Raises :class:`RunFailed` when the process exits non-zero or leaves no
     complete ``summary.json``. An interrupt (a cancelled Ray task) stops the process.
     """
     start = time.perf_counter()
     directory = _writable_directory(spec)
+    with open(os.path.join(directory, ATTEMPTS), "a+", encoding="utf-8") as fh:
+        fh.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} {socket.gethostname()} "
+                 f"pid {os.getpid()}\n")
+        fh.seek(0)
+        attempt = sum(1 for _ in fh)
     with contextlib.suppress(FileNotFoundError):
         os.remove(os.path.join(directory, SUMMARY))  # an unfinished run's, never a result
     out_path = os.path.join(directory, "stdout.log")
@@ -227,14 +236,15 @@ def execute_run(spec: RunSpec, threads: int = 1) -> Dict[str, Any]:
     stderr_tail = _tail(err_path)
     summary = read_json(os.path.join(directory, SUMMARY))
     if returncode != 0:
-        raise RunFailed(f"{spec.name}: exit code {returncode}", returncode, stderr_tail)
+        raise RunFailed(f"{spec.name}: exit code {returncode}", returncode, stderr_tail,
+                        attempt)
     if not summary_complete(summary):
         raise RunFailed(f"{spec.name}: exit code 0 but "
                         f"{'an incomplete' if summary else 'no'} {SUMMARY}",
-                        returncode, stderr_tail)
+                        returncode, stderr_tail, attempt)
     return {"summary": summary, "stdout_tail": _tail(out_path), "stderr_tail": stderr_tail,
             "node": socket.gethostname(), "directory": directory, "returncode": returncode,
-            "seconds": time.perf_counter() - start}
+            "attempts": attempt, "seconds": time.perf_counter() - start}
 
 
 # -------------------------------------------------------------------------- driver side
@@ -251,7 +261,8 @@ def _failure(spec: RunSpec, err: BaseException, attempts: int) -> Dict[str, Any]
         cause = err
     if isinstance(cause, RunFailed):
         return {"error": cause.message, "returncode": cause.returncode,
-                "stderr_tail": cause.stderr_tail, "attempts": attempts}
+                "stderr_tail": cause.stderr_tail,
+                "attempts": attempts if cause.attempt is None else cause.attempt}
     text = str(err).strip().splitlines()
     return {"error": f"{spec.name}: {type(err).__name__}: {text[-1] if text else ''}",
             "returncode": None, "stderr_tail": "\n".join(text[-TAIL_LINES:]),
@@ -308,6 +319,8 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
                     # until the driver records it finished, whatever the run leaves in
                     # its directory (a summary written when it was stopped) is no result
                     _record(spec, status="pending")
+                    with contextlib.suppress(FileNotFoundError):
+                        os.remove(os.path.join(spec.directory, ATTEMPTS))
                     pending[remote.remote(spec, cpus_per_run)] = spec
                 while pending:
                     done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
@@ -320,7 +333,7 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
                             _record(spec, status="failed", **failure)
                             outcome.failed.append((spec, failure))
                             logger.warning("%s failed after %d attempt(s): %s", spec.name,
-                                           max_retries + 1, failure["error"])
+                                           failure["attempts"], failure["error"])
                         else:
                             summary = result["summary"]
                             write_json_atomic(os.path.join(spec.directory, SUMMARY), summary)
