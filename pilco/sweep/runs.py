@@ -206,11 +206,13 @@ def _stop(proc: subprocess.Popen, grace: float = 5.0) -> None:
 
 def execute_run(spec: RunSpec, threads: int = 1) -> Dict[str, Any]:
     """Run ``spec``'s process with ``threads`` threads and return ``{"summary",
-    "stdout_tail", "stderr_tail", "node", "directory", "seconds", "returncode"}``.
+    "stdout_tail", "stderr_tail", "node", "directory", "seconds", "returncode",
+    "attempts"}``.
 
     Its standard output and error go to ``stdout.log`` and ``stderr.log`` in the run
-    directory, a line per attempt to ``attempts.log``. Raises :class:`RunFailed` when the process exits non-zero or leaves no
-    complete ``summary.json``. An interrupt (a cancelled Ray task) stops the process.
+    directory, a line per attempt to ``attempts.log``. Raises :class:`RunFailed` when
+    the process exits non-zero or leaves no complete ``summary.json``. An interrupt (a
+    cancelled Ray task) stops the process.
     """
     start = time.perf_counter()
     directory = _writable_directory(spec)
