@@ -46,6 +46,9 @@ def success_rate_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], pa
             fractions = solved_by_episode(runs, max(episodes, 1))
             ax.plot(range(1, len(fractions) + 1), fractions, marker="o",
                     label=f"{label} ({len(runs)} runs)")
+        from matplotlib.ticker import MaxNLocator
+
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("episode k")
         ax.set_ylabel("fraction of runs solved by episode k")
         ax.set_ylim(-0.02, 1.02)
