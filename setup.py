@@ -36,7 +36,12 @@ setup(
             "mujoco>=3.3,<3.12",
             "imageio>=2.20",
         ],
+        # python -m pilco.sweep: many seeds on a local Ray or a Ray cluster
+        "sweep": [
+            "ray>=2.60,<2.61",
+        ],
         "tests": [
+            "ray>=2.60,<2.61",
             "gymnasium-robotics==1.4.2",
             "mujoco>=3.3,<3.12",
             "imageio>=2.20",

@@ -1,0 +1,119 @@
+"""The sweep's figures (matplotlib, Agg backend).
+
+* ``success_rate.png``: fraction of a setting's finished runs solved by episode k, one
+  line per setting;
+* ``distance_bands.png``: per step, the median and the quartile band over runs of the
+  distance to the target, one colour per episode, one panel per setting. It needs the
+  per-step ``distances`` of the run summaries and is skipped (with a log line) without.
+"""
+from __future__ import annotations
+
+import logging
+import os
+from typing import Any, List, Mapping, Optional, Sequence
+
+import numpy as np
+
+from .aggregate import solved_by_episode
+
+__all__ = ["success_rate_figure", "distance_bands_figure", "distance_quartiles"]
+
+logger = logging.getLogger(__name__)
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def success_rate_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], path: str,
+                        title: str = "") -> Optional[str]:
+    """Draw the fraction solved by episode k for ``{setting: [summary, ...]}`` into
+    ``path``; returns ``path``, or None when no setting has a finished run."""
+    settings = {k: v for k, v in summaries.items() if v}
+    if not settings:
+        logger.info("no finished run: %s not drawn", os.path.basename(path))
+        return None
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    try:
+        for label, runs in settings.items():
+            episodes = max(len(s.get("episodes") or []) for s in runs)
+            fractions = solved_by_episode(runs, max(episodes, 1))
+            ax.plot(range(1, len(fractions) + 1), fractions, marker="o",
+                    label=f"{label} ({len(runs)} runs)")
+        from matplotlib.ticker import MaxNLocator
+
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_xlabel("episode k")
+        ax.set_ylabel("fraction of runs solved by episode k")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small")
+        if title:
+            ax.set_title(title)
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+    finally:
+        plt.close(fig)
+    return path
+
+
+def distance_quartiles(summaries: Sequence[Mapping[str, Any]], episode: int) -> np.ndarray:
+    """Quartiles over runs of episode ``episode``'s per-step distance: ``[3, T+1]`` (rows
+    q1, median, q3; T the longest episode; a step only over the runs that reached it).
+    Runs without that episode are left out; ``[3, 0]`` when none has it."""
+    rows: List[np.ndarray] = []
+    for s in summaries:
+        distances = s.get("distances") or []
+        if len(distances) >= episode:
+            rows.append(np.asarray(distances[episode - 1], dtype=np.float64))
+    if not rows:
+        return np.zeros((3, 0), dtype=np.float64)
+    length = max(len(r) for r in rows)
+    padded = np.full((len(rows), length), np.nan, dtype=np.float64)
+    for i, r in enumerate(rows):
+        padded[i, :len(r)] = r
+    return np.nanpercentile(padded, [25.0, 50.0, 75.0], axis=0)
+
+
+def distance_bands_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], path: str,
+                          title: str = "", distance_label: str = "distance to target"
+                          ) -> Optional[str]:
+    """Draw the distance bands for ``{setting: [summary, ...]}`` into ``path``; returns
+    ``path``, or None (logged) when no finished run has ``distances``."""
+    settings = {k: [s for s in v if s.get("distances")] for k, v in summaries.items()}
+    settings = {k: v for k, v in settings.items() if v}
+    if not settings:
+        logger.info("the run summaries have no per-step 'distances': %s not drawn",
+                    os.path.basename(path))
+        return None
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(settings), 1, figsize=(6.4, 3.2 * len(settings)),
+                             squeeze=False, sharex=True)
+    try:
+        for ax, (label, runs) in zip(axes[:, 0], settings.items()):
+            episodes = max(len(s["distances"]) for s in runs)
+            colours = plt.cm.viridis(np.linspace(0.0, 0.9, max(episodes, 1)))
+            for k in range(1, episodes + 1):
+                q = distance_quartiles(runs, k)
+                steps = np.arange(q.shape[1])
+                ax.fill_between(steps, q[0], q[2], color=colours[k - 1], alpha=0.2,
+                                linewidth=0)
+                ax.plot(steps, q[1], color=colours[k - 1], label=f"episode {k}")
+            ax.set_title(f"{label} ({len(runs)} runs): median, quartile band", fontsize="medium")
+            ax.set_ylabel(distance_label)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize="x-small", ncol=2)
+        axes[-1, 0].set_xlabel("step")
+        if title:
+            fig.suptitle(title)
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+    finally:
+        plt.close(fig)
+    return path

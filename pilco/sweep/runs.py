@@ -1,0 +1,364 @@
+"""Running a sweep's runs on Ray: one Ray task per run, one OS process per task.
+
+A run is ``python -m pilco.tasks TASK --seed S --output RUN_DIR --quiet --no-render
+--no-figures FLAGS...`` started by :func:`execute_run` inside a Ray task that reserves
+``cpus_per_run`` CPUs and limits TensorFlow's and the BLAS libraries' thread pools to as
+many threads, so ``C`` CPUs run ``C / cpus_per_run`` runs side by side without
+oversubscription. The Ray task returns the run's summary (and the tails of its output);
+the driver (:func:`execute`) writes ``summary.json`` and ``sweep-run.json`` into the run
+directory itself, so results reach the driver's disk even when the worker's file system
+is not shared.
+
+A process that exits non-zero or leaves no complete summary raises :class:`RunFailed` in
+its Ray task, which Ray retries (``retry_exceptions``), as it retries a task whose worker
+died; after ``max_retries`` retries the run is recorded as failed with its exit code and
+the last lines of its standard error.
+"""
+from __future__ import annotations
+
+import collections
+import contextlib
+import dataclasses
+import json
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+
+from pilco.files import write_json_atomic
+
+__all__ = ["RunSpec", "RunFailed", "SweepOutcome", "THREAD_VARIABLES", "SUMMARY", "RUN_RECORD",
+           "ATTEMPTS", "thread_environment", "read_json", "summary_complete", "finished_summary",
+           "execute_run", "execute"]
+
+logger = logging.getLogger(__name__)
+
+#: a run's summary, written by the run and again by the driver
+SUMMARY = "summary.json"
+#: the driver's record of a run: command, status, exit code, output tails, node
+RUN_RECORD = "sweep-run.json"
+
+#: environment variables that size TensorFlow's and the BLAS libraries' thread pools
+THREAD_VARIABLES = ("TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS", "OMP_NUM_THREADS",
+                    "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+#: lines of a run's standard error kept in the failure report
+TAIL_LINES = 20
+
+#: one line per attempt of a run (the driver clears it when it submits the run)
+ATTEMPTS = "attempts.log"
+
+
+@dataclasses.dataclass(frozen=True)
+class RunSpec:
+    """One run of a sweep: ``task`` with ``seed`` and ``flags`` (the setting's flags and
+    the extra task flags, without the ones the sweep always passes) into ``directory``
+    (absolute, on the driver's machine); ``label`` names the setting."""
+
+    task: str
+    seed: int
+    label: str
+    flags: Tuple[str, ...]
+    directory: str
+
+    def command(self, directory: Optional[str] = None) -> List[str]:
+        """The run's command line (``directory`` replaces the run directory)."""
+        return [sys.executable, "-m", "pilco.tasks", self.task, "--seed", str(self.seed),
+                "--output", directory or self.directory, "--quiet", "--no-render",
+                "--no-figures", *self.flags]
+
+    @property
+    def name(self) -> str:
+        return f"{self.label}/seed-{self.seed}"
+
+
+class RunFailed(Exception):
+    """A run's process failed: exit code ``returncode``, last lines of its standard
+    error ``stderr_tail``, ``attempt`` (1 for the first) as counted on that node."""
+
+    def __init__(self, message: str, returncode: Optional[int] = None,
+                 stderr_tail: str = "", attempt: Optional[int] = None):
+        super().__init__(message)
+        self.message = message
+        self.returncode = returncode
+        self.stderr_tail = stderr_tail
+        self.attempt = attempt
+
+    def __reduce__(self):  # keep the fields when Ray pickles the exception
+        return (type(self), (self.message, self.returncode, self.stderr_tail, self.attempt))
+
+    def __str__(self) -> str:
+        return self.message + (f"\n{self.stderr_tail}" if self.stderr_tail else "")
+
+
+@dataclasses.dataclass
+class SweepOutcome:
+    """What :func:`execute` did: runs ``finished`` now, ``failed`` (with their error),
+    ``not_run`` (left out by an interrupt); ``interrupted`` after Ctrl-C/SIGTERM."""
+
+    finished: List[RunSpec] = dataclasses.field(default_factory=list)
+    failed: List[Tuple[RunSpec, Dict[str, Any]]] = dataclasses.field(default_factory=list)
+    not_run: List[RunSpec] = dataclasses.field(default_factory=list)
+    interrupted: bool = False
+
+
+def thread_environment(threads: int, base: Optional[Mapping[str, str]] = None
+                       ) -> Dict[str, str]:
+    """``base`` (default ``os.environ``) with TensorFlow's intra-/inter-op pools and the
+    OpenMP/OpenBLAS/MKL pools set to ``threads`` threads."""
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    env = dict(os.environ if base is None else base)
+    env.update({name: str(threads) for name in THREAD_VARIABLES})
+    env.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    return env
+
+
+def read_json(path: str) -> Optional[Dict[str, Any]]:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def summary_complete(summary: Optional[Mapping[str, Any]]) -> bool:
+    """A parsed summary counts as a finished run unless it says ``complete: false``."""
+    return summary is not None and bool(summary.get("complete", True))
+
+
+def finished_summary(spec: RunSpec) -> Optional[Dict[str, Any]]:
+    """The complete summary already in ``spec.directory`` (a finished run to skip), or
+    None: not for a summary with ``complete: false`` or no episode, nor when the
+    directory's ``sweep-run.json`` records a run that did not finish (pending, failed,
+    interrupted). A summary without ``sweep-run.json`` (a run started by hand) counts.
+    Raises ValueError when the directory holds a run of another task, seed or
+    flags (the sweep would mix settings)."""
+    summary = read_json(os.path.join(spec.directory, SUMMARY))
+    if not summary_complete(summary) or not summary.get("episodes"):
+        return None
+    record = read_json(os.path.join(spec.directory, RUN_RECORD))
+    if record is not None and record.get("status") != "finished":
+        return None  # what a stopped or failed run left is no result
+    if summary.get("task") not in (None, spec.task) or \
+            summary.get("seed") not in (None, spec.seed):
+        raise ValueError(f"{spec.directory} holds a run of task {summary.get('task')!r} "
+                         f"seed {summary.get('seed')!r}, not {spec.task!r} seed {spec.seed}")
+    if record is not None and list(record.get("flags", [])) != list(spec.flags):
+        raise ValueError(f"{spec.directory} holds a run made with the flags "
+                         f"{' '.join(record.get('flags', [])) or '(none)'}, not "
+                         f"{' '.join(spec.flags) or '(none)'}: choose another --output "
+                         f"or remove that directory")
+    return summary
+
+
+# -------------------------------------------------------------------------- worker side
+def _tail(path: str, lines: int = TAIL_LINES) -> str:
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            return "".join(collections.deque(fh, maxlen=lines)).rstrip()
+    except OSError:
+        return ""
+
+
+def _writable_directory(spec: RunSpec) -> str:
+    """``spec.directory`` if it can be created and written here, else the same path
+    under this machine's temporary directory (a worker without the driver's disk)."""
+    try:
+        os.makedirs(spec.directory, exist_ok=True)
+        if os.access(spec.directory, os.W_OK):
+            return spec.directory
+    except OSError:
+        pass
+    parts = os.path.normpath(spec.directory).split(os.sep)[-3:]
+    fallback = os.path.join(tempfile.gettempdir(), "pilco-sweep", *parts)
+    os.makedirs(fallback, exist_ok=True)
+    return fallback
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child before exec
+    """Linux: the run gets SIGTERM if its Ray worker dies, instead of running on."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _stop(proc: subprocess.Popen, grace: float = 5.0) -> None:
+    """Terminate ``proc`` (SIGTERM, then SIGKILL after ``grace`` seconds)."""
+    if proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=grace)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def execute_run(spec: RunSpec, threads: int = 1) -> Dict[str, Any]:
+    """Run ``spec``'s process with ``threads`` threads and return ``{"summary",
+    "stdout_tail", "stderr_tail", "node", "directory", "seconds", "returncode",
+    "attempts"}``.
+
+    Its standard output and error go to ``stdout.log`` and ``stderr.log`` in the run
+    directory, a line per attempt to ``attempts.log``. Raises :class:`RunFailed` when
+    the process exits non-zero or leaves no complete ``summary.json``. An interrupt (a
+    cancelled Ray task) stops the process.
+    """
+    start = time.perf_counter()
+    directory = _writable_directory(spec)
+    with open(os.path.join(directory, ATTEMPTS), "a+", encoding="utf-8") as fh:
+        fh.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} {socket.gethostname()} "
+                 f"pid {os.getpid()}\n")
+        fh.seek(0)
+        attempt = sum(1 for _ in fh)
+    with contextlib.suppress(FileNotFoundError):
+        os.remove(os.path.join(directory, SUMMARY))  # an unfinished run's, never a result
+    out_path = os.path.join(directory, "stdout.log")
+    err_path = os.path.join(directory, "stderr.log")
+    with open(out_path, "wb") as out, open(err_path, "wb") as err:
+        proc = subprocess.Popen(spec.command(directory), stdout=out, stderr=err,
+                                stdin=subprocess.DEVNULL, env=thread_environment(threads),
+                                preexec_fn=_die_with_parent if sys.platform == "linux"
+                                else None)
+        try:
+            returncode = proc.wait()
+        except BaseException:
+            _stop(proc)
+            raise
+    stderr_tail = _tail(err_path)
+    summary = read_json(os.path.join(directory, SUMMARY))
+    if returncode != 0:
+        raise RunFailed(f"{spec.name}: exit code {returncode}", returncode, stderr_tail,
+                        attempt)
+    if not summary_complete(summary):
+        raise RunFailed(f"{spec.name}: exit code 0 but "
+                        f"{'an incomplete' if summary else 'no'} {SUMMARY}",
+                        returncode, stderr_tail, attempt)
+    return {"summary": summary, "stdout_tail": _tail(out_path), "stderr_tail": stderr_tail,
+            "node": socket.gethostname(), "directory": directory, "returncode": returncode,
+            "attempts": attempt, "seconds": time.perf_counter() - start}
+
+
+# -------------------------------------------------------------------------- driver side
+def _record(spec: RunSpec, **fields) -> None:
+    write_json_atomic(os.path.join(spec.directory, RUN_RECORD), {
+        "task": spec.task, "seed": spec.seed, "setting": spec.label, "flags": list(spec.flags),
+        "command": spec.command()[1:], **fields})
+
+
+def _failure(spec: RunSpec, err: BaseException, attempts: int) -> Dict[str, Any]:
+    """``{"error", "returncode", "stderr_tail", "attempts"}`` of a Ray error."""
+    cause = getattr(err, "cause", None)
+    if isinstance(err, RunFailed):
+        cause = err
+    if isinstance(cause, RunFailed):
+        return {"error": cause.message, "returncode": cause.returncode,
+                "stderr_tail": cause.stderr_tail,
+                "attempts": attempts if cause.attempt is None else cause.attempt}
+    text = str(err).strip().splitlines()
+    return {"error": f"{spec.name}: {type(err).__name__}: {text[-1] if text else ''}",
+            "returncode": None, "stderr_tail": "\n".join(text[-TAIL_LINES:]),
+            "attempts": attempts}
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """SIGTERM raises KeyboardInterrupt in the driver (main thread only)."""
+    def handler(signum, frame):  # noqa: ARG001 - signal handler signature
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int = 1,
+            progress: bool = True,
+            on_result: Optional[Callable[[RunSpec, Dict[str, Any]], None]] = None
+            ) -> SweepOutcome:
+    """Run ``specs`` as Ray tasks on the Ray instance this process is connected to.
+
+    Every finished run's summary and record are written into its directory as results
+    arrive; a failed run is recorded with its error after ``max_retries`` retries. On
+    Ctrl-C (or SIGTERM) the pending tasks are cancelled, their processes stopped, and the
+    outcome returned with ``interrupted=True``.
+    """
+    import ray
+    from tqdm.auto import tqdm
+
+    if isinstance(cpus_per_run, bool) or not isinstance(cpus_per_run, int) or cpus_per_run < 1:
+        raise ValueError(f"cpus_per_run must be a positive integer, got {cpus_per_run!r}")
+    if isinstance(max_retries, bool) or not isinstance(max_retries, int) or max_retries < 0:
+        raise ValueError(f"max_retries must be a non-negative integer, got {max_retries!r}")
+    if not ray.is_initialized():
+        raise RuntimeError("execute() needs a Ray connection: call ray.init() first")
+    remote = ray.remote(execute_run).options(num_cpus=cpus_per_run, max_retries=max_retries,
+                                             retry_exceptions=True)
+    outcome = SweepOutcome()
+    pending: Dict[Any, RunSpec] = {}
+    bar = tqdm(total=len(specs), unit="run", desc="sweep", file=sys.stderr,
+               disable=not progress, dynamic_ncols=True)
+    try:
+        with _sigterm_as_interrupt():
+            try:
+                for spec in specs:
+                    # until the driver records it finished, whatever the run leaves in
+                    # its directory (a summary written when it was stopped) is no result
+                    _record(spec, status="pending")
+                    with contextlib.suppress(FileNotFoundError):
+                        os.remove(os.path.join(spec.directory, ATTEMPTS))
+                    pending[remote.remote(spec, cpus_per_run)] = spec
+                while pending:
+                    done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+                    for ref in done:
+                        spec = pending.pop(ref)
+                        try:
+                            result = ray.get(ref)
+                        except (ray.exceptions.RayError, RunFailed) as err:
+                            failure = _failure(spec, err, max_retries + 1)
+                            _record(spec, status="failed", **failure)
+                            outcome.failed.append((spec, failure))
+                            logger.warning("%s failed after %d attempt(s): %s", spec.name,
+                                           failure["attempts"], failure["error"])
+                        else:
+                            summary = result["summary"]
+                            write_json_atomic(os.path.join(spec.directory, SUMMARY), summary)
+                            _record(spec, status="finished",
+                                    **{k: v for k, v in result.items() if k != "summary"})
+                            outcome.finished.append(spec)
+                            if on_result is not None:
+                                on_result(spec, summary)
+                        bar.update(1)
+            except KeyboardInterrupt:
+                outcome.interrupted = True
+                logger.warning("interrupted: cancelling %d unfinished run(s); finished "
+                               "runs are kept", len(pending))
+                for ref in pending:
+                    with contextlib.suppress(Exception):
+                        ray.cancel(ref, force=False)
+                # give running tasks a moment to stop their processes
+                with contextlib.suppress(Exception, KeyboardInterrupt):
+                    ray.wait(list(pending), num_returns=len(pending), timeout=10.0)
+                outcome.not_run.extend(pending.values())
+                for spec in pending.values():
+                    with contextlib.suppress(OSError):
+                        _record(spec, status="interrupted")
+    finally:
+        bar.close()
+    return outcome

@@ -1,0 +1,286 @@
+"""pilco.sweep without Ray: statistics on hand-made summaries, argument checks, figures."""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+from pilco.sweep import aggregate, cli, figures, runs
+
+
+def summary(seed, solved_at=None, success=None, episodes=3, final=0.5, minimum=0.2,
+            steps_to_target=None, total=10.0, distances=None, **extra):
+    """A run summary like the tasks write (``success`` left out when None)."""
+    recs = [{"episode": k, "random": k == 1, "steps": 5, "cost": 1.0,
+             "final_distance": 1.0, "min_distance": 0.9, "steps_to_target": None,
+             "seconds": {"interaction": 0.1, "model": 0.2, "policy": 0.3}}
+            for k in range(1, episodes + 1)]
+    recs[-1].update(final_distance=final, min_distance=minimum,
+                    steps_to_target=steps_to_target)
+    s = {"task": "cartpole", "seed": seed, "solved": solved_at is not None,
+         "solved_at_episode": solved_at, "episodes": recs,
+         "seconds": {"interaction": 0.3, "model": 0.6, "policy": 0.9, "total": total}, **extra}
+    if success is not None:
+        s["success"] = success
+    if distances is not None:
+        s["distances"] = distances
+    return s
+
+
+# ------------------------------------------------------------------------------ Wilson
+def test_wilson_interval_known_values():
+    z2 = aggregate.WILSON_Z95 ** 2
+    low, high = aggregate.wilson_interval(0, 20)
+    assert low == 0.0
+    assert high == pytest.approx(z2 / (20 + z2), rel=1e-12)
+    assert high == pytest.approx(0.161125, abs=1e-6)
+    low, high = aggregate.wilson_interval(20, 20)
+    assert high == 1.0
+    assert low == pytest.approx(20 / (20 + z2), rel=1e-12)
+    assert low == pytest.approx(0.838875, abs=1e-6)
+    low, high = aggregate.wilson_interval(10, 20)
+    assert low == pytest.approx(0.299298, abs=1e-6)
+    assert high == pytest.approx(0.700702, abs=1e-6)
+    assert low + high == pytest.approx(1.0, rel=1e-14)
+
+
+def test_wilson_interval_contains_rate_and_shrinks_with_runs():
+    for k, n in [(1, 3), (7, 10), (3, 40)]:
+        low, high = aggregate.wilson_interval(k, n)
+        assert 0.0 <= low < k / n < high <= 1.0
+    wide = aggregate.wilson_interval(5, 10)
+    narrow = aggregate.wilson_interval(50, 100)
+    assert narrow[1] - narrow[0] < wide[1] - wide[0]
+
+
+def test_wilson_interval_rejects_bad_counts():
+    with pytest.raises(ValueError, match="successes <= runs"):
+        aggregate.wilson_interval(3, 2)
+    with pytest.raises(ValueError, match="successes <= runs"):
+        aggregate.wilson_interval(-1, 2)
+    with pytest.raises(TypeError, match="booleans"):
+        aggregate.wilson_interval(True, 2)
+    assert all(math.isnan(v) for v in aggregate.wilson_interval(0, 0))
+
+
+# --------------------------------------------------------------------------- quartiles
+def test_quantiles_match_numpy_on_finite_values():
+    rng = np.random.default_rng(0)
+    xs = rng.standard_normal(11)
+    for q in (0.0, 0.25, 0.5, 0.75, 1.0):
+        assert aggregate.quantile(xs, q) == pytest.approx(np.quantile(xs, q), rel=1e-12)
+    assert aggregate.quartiles([1, 2, 3, 4]) == {"q1": 1.75, "median": 2.5, "q3": 3.25}
+    assert aggregate.quartiles([]) == {"q1": None, "median": None, "q3": None}
+
+
+def test_quantile_with_unsolved_runs_is_infinite_once_they_weigh_in():
+    xs = [2, 3, math.inf, math.inf]
+    assert aggregate.quantile(xs, 0.25) == 2.75
+    assert aggregate.quantile(xs, 0.5) == math.inf
+    assert aggregate.quartiles(xs) == {"q1": 2.75, "median": None, "q3": None}
+    with pytest.raises(ValueError, match="NaN"):
+        aggregate.quantile([1.0, math.nan], 0.5)
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        aggregate.quantile([1.0], 1.5)
+
+
+# ------------------------------------------------------------------------- aggregates
+def test_episodes_to_solve_counts_unsolved_runs():
+    runs_ = [summary(0, solved_at=2), summary(1, solved_at=3), summary(2, solved_at=4),
+             summary(3)]
+    r = aggregate.aggregate_setting(runs_)
+    assert r["episodes_to_solve"] == {"q1": 2.75, "median": 3.5, "q3": None,
+                                      "solved": 3, "unsolved": 1}
+    assert r["successes"] == 3
+    assert r["success_rate"] == 0.75
+    assert r["success_ci95"] == list(aggregate.wilson_interval(3, 4))
+
+
+def test_success_falls_back_to_solved():
+    assert aggregate.run_success(summary(0, solved_at=2)) is True
+    assert aggregate.run_success(summary(0)) is False
+    # the task's own rule wins over the solved flag, both ways
+    assert aggregate.run_success(summary(0, solved_at=2, success=False)) is False
+    assert aggregate.run_success(summary(0, success=True)) is True
+    with pytest.raises(ValueError, match="neither"):
+        aggregate.run_success({"task": "cartpole"})
+    r = aggregate.aggregate_setting([summary(0, solved_at=2, success=False),
+                                     summary(1, success=True), summary(2, solved_at=3)])
+    assert r["successes"] == 2
+
+
+def test_aggregate_fields():
+    runs_ = [summary(0, final=0.1, minimum=0.05, steps_to_target=4, total=10.0),
+             summary(1, final=0.3, minimum=0.1, steps_to_target=8, total=30.0),
+             summary(2, final=0.2, minimum=0.2, total=20.0)]
+    r = aggregate.aggregate_setting(runs_, runs=5, failed=1, not_run=1)
+    assert (r["runs"], r["finished"], r["failed"], r["not_run"]) == (5, 3, 1, 1)
+    assert r["last_episode"]["steps_to_target"] == {"median": 6.0, "reached": 2,
+                                                     "not_reached": 1}
+    assert r["last_episode"]["final_distance"] == pytest.approx(
+        {"q1": 0.15, "median": 0.2, "q3": 0.25})
+    assert r["last_episode"]["min_distance"]["median"] == 0.1
+    assert r["seconds_per_run"] == {"median": 20.0, "max": 30.0}
+    assert "episodes_to_recover" not in r
+    empty = aggregate.aggregate_setting([], runs=2, failed=2)
+    assert empty["success_rate"] is None and empty["success_ci95"] is None
+    assert empty["finished"] == 0 and empty["failed"] == 2
+
+
+def test_adaptation_adds_episodes_to_recover():
+    runs_ = [summary(0, episodes_to_recover=1, damage_at_episode=3),
+             summary(1, episodes_to_recover=None, damage_at_episode=3),
+             summary(2, episodes_to_recover=3, damage_at_episode=4)]
+    r = aggregate.aggregate_setting(runs_)["episodes_to_recover"]
+    assert r == {"q1": 2.0, "median": 3.0, "q3": None, "recovered": 2, "not_recovered": 1}
+
+
+def test_solved_by_episode_and_table():
+    runs_ = [summary(0, solved_at=2), summary(1, solved_at=3), summary(2)]
+    assert aggregate.solved_by_episode(runs_, 4) == pytest.approx([0.0, 1 / 3, 2 / 3, 2 / 3])
+    table = aggregate.format_table({"default": aggregate.aggregate_setting(runs_)})
+    assert "default" in table and "0.67 [" in table
+
+
+# --------------------------------------------------------------------------- arguments
+def test_parse_seeds():
+    assert cli.parse_seeds("0-3") == [0, 1, 2, 3]
+    assert cli.parse_seeds("5,0,3") == [0, 3, 5]
+    assert cli.parse_seeds("0-2,10,12-13,1") == [0, 1, 2, 10, 12, 13]
+    for bad in ("", "3-1", "a", "1-", "-1", "1,,2", "0-2-4"):
+        with pytest.raises(ValueError):
+            cli.parse_seeds(bad)
+
+
+def test_assignments_and_flags():
+    assert cli.parse_assignment("horizon=30") == ("horizon", "30")
+    assert cli.parse_assignment("policy-iters=3") == ("policy_iters", "3")
+    assert cli.parse_assignment("cost_width=0.2,0.3", grid=True) == ("cost_width", ["0.2", "0.3"])
+    for bad in ("horizon", "=3", "horizon=", "1x=2", "seed=3", "output=x"):
+        with pytest.raises(ValueError):
+            cli.parse_assignment(bad)
+    with pytest.raises(ValueError, match="repeated"):
+        cli.parse_assignment("horizon=3,3", grid=True)
+    parser = cli.task_parser("cartpole")
+    assert parser is not None
+    assert cli.setting_flags("horizon", "30", parser) == ["--horizon", "30"]
+    assert cli.setting_flags("retrain_unchanged_model", "true", parser) == \
+        ["--retrain-unchanged-model"]
+    assert cli.setting_flags("retrain_unchanged_model", "false", parser) == []
+    with pytest.raises(ValueError, match="takes no value"):
+        cli.setting_flags("retrain_unchanged_model", "3", parser)
+    with pytest.raises(ValueError, match="no flag --bogus"):
+        cli.setting_flags("bogus", "1", parser)
+    # without the task's parser: true/false are flags without value
+    assert cli.setting_flags("no_early_stop", "true", None) == ["--no-early-stop"]
+    assert cli.setting_flags("horizon", "30", None) == ["--horizon", "30"]
+
+
+def test_grid_settings_and_labels():
+    parser = cli.task_parser("cartpole")
+    combos = cli.settings([("horizon", "30")], [("max_force", ["5", "10"]),
+                                                ("squash", ["sat", "sin"])], parser)
+    assert [label for label, _ in combos] == [
+        "horizon=30,max_force=5,squash=sat", "horizon=30,max_force=5,squash=sin",
+        "horizon=30,max_force=10,squash=sat", "horizon=30,max_force=10,squash=sin"]
+    assert combos[1][1] == ["--horizon", "30", "--max-force", "5", "--squash", "sin"]
+    assert cli.settings([], [], parser) == [("default", [])]
+    with pytest.raises(ValueError, match="more than once"):
+        cli.settings([("horizon", "3")], [("horizon", ["4", "5"])], parser)
+
+
+def test_plan_builds_run_directories(tmp_path):
+    args = cli.build_parser().parse_args(["cartpole", "--seeds", "0,2", "--output",
+                                          str(tmp_path), "--grid", "horizon=4,5"])
+    specs, described = cli.plan(args, ["--episodes", "2"])
+    assert [s.directory for s in specs] == [
+        os.path.join(str(tmp_path), label, f"seed-{seed}")
+        for label in ("horizon=4", "horizon=5") for seed in (0, 2)]
+    assert specs[0].flags == ("--horizon", "4", "--episodes", "2")
+    assert specs[0].command()[2:] == ["pilco.tasks", "cartpole", "--seed", "0", "--output",
+                                      specs[0].directory, "--quiet", "--no-render",
+                                      "--no-figures", "--horizon", "4", "--episodes", "2"]
+    assert described[1] == {"label": "horizon=5", "flags": ["--horizon", "5", "--episodes", "2"]}
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["nope"], "unknown task"),
+    (["cartpole", "--seeds", "5-2"], "backwards"),
+    (["cartpole", "--set", "horizon"], "not KEY=VALUE"),
+    (["cartpole", "--set", "bogus=1"], "no flag --bogus"),
+    (["cartpole", "--grid", "horizon=4,x"], "invalid int value"),
+    (["cartpole", "--", "--seed", "3"], "set by the sweep"),
+    (["cartpole", "--", "--not-a-flag"], "unrecognized arguments"),
+    (["cartpole", "--max-retries", "-1"], "max-retries"),
+])
+def test_bad_arguments_fail_before_ray(argv, message, monkeypatch, capsys, tmp_path):
+    def no_ray(*_):
+        raise AssertionError("Ray must not start for bad arguments")
+
+    monkeypatch.setattr(cli, "_start_ray", no_ray)
+    with pytest.raises(SystemExit) as stop:
+        cli.main([*argv[:1], "--output", str(tmp_path), *argv[1:]])
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_resume_refuses_a_directory_of_other_flags(tmp_path):
+    spec = runs.RunSpec("cartpole", 0, "default", ("--horizon", "5"), str(tmp_path))
+    assert runs.finished_summary(spec) is None
+    from pilco.files import write_json_atomic
+
+    write_json_atomic(str(tmp_path / runs.SUMMARY), summary(0))
+    assert runs.finished_summary(spec)["seed"] == 0
+    write_json_atomic(str(tmp_path / runs.RUN_RECORD),
+                      {"flags": ["--horizon", "6"], "status": "finished"})
+    with pytest.raises(ValueError, match="--horizon 6"):
+        runs.finished_summary(spec)
+    write_json_atomic(str(tmp_path / runs.RUN_RECORD),
+                      {"flags": ["--horizon", "5"], "status": "finished"})
+    write_json_atomic(str(tmp_path / runs.SUMMARY), {**summary(0), "complete": False})
+    assert runs.finished_summary(spec) is None  # an interrupted run is run again
+    for status in ("pending", "failed", "interrupted"):  # what such a run left behind
+        write_json_atomic(str(tmp_path / runs.SUMMARY), summary(0))
+        write_json_atomic(str(tmp_path / runs.RUN_RECORD),
+                          {"flags": ["--horizon", "5"], "status": status})
+        assert runs.finished_summary(spec) is None
+    write_json_atomic(str(tmp_path / runs.RUN_RECORD),
+                      {"flags": ["--horizon", "5"], "status": "finished"})
+    assert runs.finished_summary(spec)["seed"] == 0
+    write_json_atomic(str(tmp_path / runs.SUMMARY), {**summary(0), "episodes": []})
+    assert runs.finished_summary(spec) is None
+    write_json_atomic(str(tmp_path / runs.SUMMARY), summary(1))
+    with pytest.raises(ValueError, match="seed 1"):
+        runs.finished_summary(spec)
+
+
+def test_thread_environment():
+    env = runs.thread_environment(3, {"PATH": "/bin", "OMP_NUM_THREADS": "8"})
+    assert env["PATH"] == "/bin"
+    for name in runs.THREAD_VARIABLES:
+        assert env[name] == "3"
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="threads"):
+            runs.thread_environment(bad)
+
+
+# ----------------------------------------------------------------------------- figures
+def test_figures(tmp_path):
+    d = [[1.0, 0.8, 0.5], [1.0, 0.5, 0.2, 0.1]]
+    with_distances = {"a": [summary(0, solved_at=2, episodes=2, distances=d),
+                            summary(1, episodes=2, distances=[[1.0, 0.9], [1.0, 0.7, 0.4]])],
+                      "b": [summary(0, episodes=2, distances=d)]}
+    q = figures.distance_quartiles(with_distances["a"], 2)
+    assert q.shape == (3, 4)
+    np.testing.assert_allclose(q[1], [1.0, 0.6, 0.3, 0.1])
+    assert figures.distance_quartiles(with_distances["a"], 3).shape == (3, 0)
+    path = figures.success_rate_figure(with_distances, str(tmp_path / "rate.png"))
+    assert path and os.path.getsize(path) > 0
+    path = figures.distance_bands_figure(with_distances, str(tmp_path / "bands.png"))
+    assert path and os.path.getsize(path) > 0
+    # summaries without per-step distances: no figure
+    assert figures.distance_bands_figure({"a": [summary(0)]}, str(tmp_path / "x.png")) is None
+    assert not (tmp_path / "x.png").exists()
+    assert figures.success_rate_figure({"a": []}, str(tmp_path / "y.png")) is None
