@@ -1,8 +1,10 @@
 """Test-suite set-up shared by ``tests/`` and the notebooks in ``notebooks/``.
 
 ``pytest.ini`` runs ``tests/`` and ``notebooks/`` with ``--nbmake``: every notebook is one
-test, executed top to bottom in a fresh Jupyter kernel (cwd ``notebooks/``, outputs
-discarded) and failed on any cell error. This file
+test, executed top to bottom in a fresh Jupyter kernel (cwd ``notebooks/``) and failed on
+any cell error. The notebooks are stored with the outputs of their full settings
+(``python notebooks/execute.py`` writes them; ``tests/test_notebooks.py`` checks them);
+this run ignores those outputs and discards its own. This file
 
 * makes the kernels use the notebooks' small settings: ``PILCO_NOTEBOOK_FAST=1`` unless
   the variable is already set (``PILCO_NOTEBOOK_FAST=0 python -m pytest notebooks``
@@ -15,8 +17,9 @@ discarded) and failed on any cell error. This file
 * skips a notebook whose metadata lists Python modules that are not installed
   (``"pilco": {"requires": [...]}``; the reacher notebooks need mujoco and
   gymnasium_robotics);
-* fails a notebook whose execution changed anything in ``notebooks/`` (unless nbmake's
-  ``--overwrite`` asks for the executed notebook to be written back).
+* fails a notebook whose execution changed anything in ``notebooks/``, and refuses
+  nbmake's ``--overwrite`` (it would store the FAST outputs, uncleaned, in place of the
+  full ones: ``python notebooks/execute.py`` stores outputs).
 """
 from __future__ import annotations
 
@@ -62,6 +65,14 @@ def _missing(modules) -> list:
     return missing
 
 
+def pytest_configure(config):
+    if config.getoption("overwrite", False):
+        raise pytest.UsageError(
+            "nbmake --overwrite would store the notebooks' FAST outputs; "
+            "`python notebooks/execute.py` executes them with the full settings and stores "
+            "cleaned outputs")
+
+
 def pytest_collection_modifyitems(config, items):
     explicit_timeout = config.getoption("timeout", None) is not None
     for item in items:
@@ -89,8 +100,8 @@ def _snapshot(directory: Path) -> dict:
 
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_call(item):
-    if not _is_notebook(item) or item.config.getoption("overwrite", False):
-        return (yield)   # nbmake --overwrite writes the executed notebook back on purpose
+    if not _is_notebook(item):
+        return (yield)
     directory = Path(item.path).parent
     before = _snapshot(directory)
     result = yield
