@@ -84,10 +84,8 @@ def predictions_after(exp, episode: Episode) -> Dict[str, np.ndarray]:
     if len(X) == 0:
         return {}
     try:
-        agent = exp.agent
-        mean, var = agent.mgpr.predict_f(agent.gp_inputs(X))
-        noise = np.asarray(agent.mgpr.noise_variance)
-        return {"onestep_mean": np.asarray(mean), "onestep_var": np.asarray(var) + noise[None, :]}
+        mean, var = exp.agent.one_step_prediction(X)
+        return {"onestep_mean": np.asarray(mean), "onestep_var": np.asarray(var)}
     except Exception as err:  # noqa: BLE001
         logger.warning("one-step prediction failed: %s", err)
         return {}
