@@ -275,3 +275,16 @@ def test_presets_sit_between_the_defaults_and_the_flags_given(tmp_path):
     assert (resumed.policy_iters, resumed.horizon, resumed.episodes) == (30, 20, 6)
     with pytest.raises(ValueError, match="sets unknown flags"):
         add_preset_argument(argparse.ArgumentParser(), {"bad": {"nope": 1}})
+
+
+def test_the_reacher_paper_code_preset():
+    from pilco.tasks import reacher
+
+    args = reacher.parse_args(["--preset", "paper-code", "--cost-width", "0.5"], damaged=True)
+    assert (args.planning_horizon, args.start_var, args.policy_iters, args.policy_iters_first,
+            args.max_data) == (100, 0.1, 30, 60, 100)
+    assert args.cost_width == 0.5  # a flag given wins over the preset
+    kw = reacher.env_kwargs(args, damaged=True)
+    assert kw["joint_state"] == "commanded" and kw["damage_mode"] == "zero_on_step"
+    healthy = reacher.parse_args([])
+    assert healthy.preset is None and reacher.env_kwargs(healthy, False)["joint_state"] == "measured"

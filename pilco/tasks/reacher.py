@@ -33,7 +33,8 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig, make_env
-from ..experiment.cli import (add_common_arguments, configure_logging, finish,
+from ..experiment.cli import (add_common_arguments, add_preset_argument, configure_logging,
+                              finish,
                               learning_settings, parse_args_with_resume)
 
 __all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
@@ -42,6 +43,11 @@ __all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
 
 #: Paper figures of the reacher (its own machine, with a GPU).
 PAPER_SECONDS = {"interaction": 21.22, "model": 37.53, "policy": 1380.95, "total": 1598.0}
+
+#: The paper's published scripts, as far as this library reproduces them (their GP priors
+#: and the policy's trainable noise variance are not reproduced).
+PAPER_CODE = dict(planning_horizon=100, start_var=0.1, cost_width=1.0, policy_iters=30,
+                  policy_iters_first=60, max_data=100, joint_state="commanded")
 
 #: success: the last episode reaches the target within this many steps
 SUCCESS_STEPS = 15
@@ -57,6 +63,8 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
     add_common_arguments(parser, episodes=4, steps=50, basis_functions=50, policy_iters=25,
                          model_iters=100, policy_restarts=1, model_restarts=1, max_data=None,
                          output=f"runs/{name}-seed{{seed}}")
+    presets = {"paper-code": dict(PAPER_CODE, **({"damage_mode": "zero_on_step"}
+                                                 if damaged else {}))}
     g = parser.add_argument_group("reacher")
     g.add_argument("--cost-width", type=float, default=0.4 if damaged else 0.2,
                    help="σ_c [m] of the saturating cost on the gripper-target distance")
@@ -79,8 +87,13 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                    help="target position [m] (default the env's (1.2, 0.38, 0.38))")
     g.add_argument("--start-noise", type=float, default=0.0,
                    help="std [rad] of noise on the start joint angles")
-    g.add_argument("--damage-mode", choices=("zero", "stuck"), default="zero",
-                   help="damaged arm: elbow forced to 0 rad ('zero', the paper) or stuck")
+    g.add_argument("--damage-mode", choices=("zero", "zero_on_step", "stuck"), default="zero",
+                   help="damaged arm: elbow forced to 0 rad ('zero'; 'zero_on_step': the "
+                        "arm starts healthy and straightens on the first step, as the "
+                        "paper's code) or stuck")
+    g.add_argument("--joint-state", choices=("measured", "commanded"), default="measured",
+                   help="the state's joint angles: measured, or commanded (the running sum "
+                        "of the actions, as the paper's code)")
     g.add_argument("--damaged-joints", nargs="+", default=["elbow_flex"],
                    help="damaged arm: joints that ignore commands")
     g.add_argument("--constant-input-lengthscale", type=float, default=100.0,
@@ -88,12 +101,14 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                         "damaged joint) after every model fit; 0: leave them to training")
     g.add_argument("--render-size", type=int, nargs=2, default=[320, 240],
                    metavar=("W", "H"), help="frame size of the rendered final episode")
+    add_preset_argument(parser, presets)
     return parser
 
 
 def env_kwargs(args: argparse.Namespace, damaged: bool) -> Dict[str, Any]:
     """Keyword arguments of ``FetchJointReacher`` for the parsed ``args``."""
     kw = dict(max_action=args.max_action, distance_threshold=args.threshold,
+              joint_state=getattr(args, "joint_state", "measured"),
               start_noise=args.start_noise, render_width=args.render_size[0],
               render_height=args.render_size[1])
     if args.target is not None:
