@@ -14,7 +14,7 @@ import signal
 from typing import Iterator, Optional
 
 __all__ = ["sigterm_as_keyboard_interrupt", "stop_requested", "raise_if_stop_requested",
-           "interrupts_deferred"]
+           "interrupts_deferred", "signal_handler"]
 
 #: number of the termination signal received inside ``sigterm_as_keyboard_interrupt``
 _stop_signal: Optional[int] = None
@@ -58,14 +58,20 @@ def sigterm_as_keyboard_interrupt() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def interrupts_deferred() -> Iterator[None]:
-    """Ignore Ctrl-C within the block (a second Ctrl-C while saving must not lose data)."""
+def signal_handler(signum: int, handler) -> Iterator[None]:
+    """Within the block, ``handler`` handles ``signum``; the previous handler is restored
+    afterwards. Only the main thread can install handlers; elsewhere this does nothing."""
     try:
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        previous = signal.signal(signum, handler)
     except ValueError:  # not the main thread
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        signal.signal(signum, previous)
+
+
+def interrupts_deferred():
+    """Ignore Ctrl-C within the block (a second Ctrl-C while saving must not lose data)."""
+    return signal_handler(signal.SIGINT, signal.SIG_IGN)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
 from typing import Any, List, Mapping, Optional, Sequence
 
 import numpy as np
@@ -28,6 +29,16 @@ def _pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def _save_and_close(plt, fig, path: str) -> None:
+    """Write ``fig`` to ``path`` unless drawing it failed; always close it."""
+    try:
+        if sys.exc_info()[0] is None:
+            fig.tight_layout()
+            fig.savefig(path, dpi=120)
+    finally:
+        plt.close(fig)
 
 
 def success_rate_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], path: str,
@@ -56,10 +67,8 @@ def success_rate_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], pa
         ax.legend(fontsize="small")
         if title:
             ax.set_title(title)
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
     finally:
-        plt.close(fig)
+        _save_and_close(plt, fig, path)
     return path
 
 
@@ -112,8 +121,6 @@ def distance_bands_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], 
         axes[-1, 0].set_xlabel("step")
         if title:
             fig.suptitle(title)
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
     finally:
-        plt.close(fig)
+        _save_and_close(plt, fig, path)
     return path

@@ -28,8 +28,10 @@ import subprocess
 import sys
 import tempfile
 import time
+
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
+from pilco.experiment.signals import signal_handler
 from pilco.files import write_json_atomic
 
 __all__ = ["RunSpec", "RunFailed", "SweepOutcome", "THREAD_VARIABLES", "SUMMARY", "RUN_RECORD",
@@ -271,21 +273,12 @@ def _failure(spec: RunSpec, err: BaseException, attempts: int) -> Dict[str, Any]
             "attempts": attempts}
 
 
-@contextlib.contextmanager
 def _sigterm_as_interrupt():
     """SIGTERM raises KeyboardInterrupt in the driver (main thread only)."""
     def handler(signum, frame):  # noqa: ARG001 - signal handler signature
         raise KeyboardInterrupt
 
-    try:
-        previous = signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    return signal_handler(signal.SIGTERM, handler)
 
 
 def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int = 1,
