@@ -17,9 +17,7 @@ safe point after saving. Episodes are numbered from 1 (episode 1 is the first ra
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import logging
-import os
 import time
 from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 
@@ -28,10 +26,10 @@ import numpy as np
 from .config import ExperimentConfig
 from .episode import Episode, distance_from_info, make_env, rollout
 from .learning import improve_policy, predictions_after, predictions_before, train_model
-from .scoring import PHASES, episode_record, episode_solved
 from .signals import (interrupts_deferred, raise_if_stop_requested,
                       sigterm_as_keyboard_interrupt, stop_requested)
-from .store import RunStore
+from .record import RunRecord
+from .store import restore_progress
 
 __all__ = ["Experiment"]
 
@@ -40,7 +38,7 @@ logger = logging.getLogger(__name__)
 Data = Tuple[np.ndarray, np.ndarray]
 
 
-class Experiment:
+class Experiment(RunRecord):
     """A PILCO run on one env, stored in ``directory``.
 
     Args:
@@ -60,9 +58,8 @@ class Experiment:
         success_fn: ``summary -> bool``, the task's success rule written to the summary
             as ``"success"`` (default: ``summary["solved"]``).
 
-    Task state that must survive a resume lives in typed attributes:
-    ``train_from_episode`` (1-based: the model learns from this episode on) and
-    ``summary_fields`` (extra fields of the summary, e.g. when a damage happened).
+    The collected episodes, records, timings, task state, saving and the summary are
+    those of :class:`~pilco.experiment.record.RunRecord`.
     """
 
     def __init__(self, config: ExperimentConfig, directory: str,
@@ -73,36 +70,13 @@ class Experiment:
                  render_fn: Optional[Callable[[Episode], List[np.ndarray]]] = None,
                  after_model_fit: Optional[Callable[[Any], None]] = None,
                  success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None):
-        self.config = config
-        self.store = RunStore(directory)
+        super().__init__(config, directory, args, success_fn)
         self.build_agent = build_agent
         self.distance_fn = distance_fn or distance_from_info
-        self.args = dict(args or {})
         self.render_fn = render_fn
         self.after_model_fit = after_model_fit
-        self.success_fn = success_fn
         self._make_env = make_env
         self.env = None
-        self.agent = None
-        self.episodes: List[Episode] = []
-        self.records: List[Dict[str, Any]] = []
-        #: the model's predictions for each episode (empty for random episodes)
-        self.predictions: List[Dict[str, np.ndarray]] = []
-        self.seconds = {p: 0.0 for p in PHASES}
-        self.cpu_seconds: Dict[int, Dict[str, float]] = {}
-        self.wall_seconds = 0.0
-        self.train_from_episode = 1
-        self.summary_fields: Dict[str, Any] = {}
-        self.interrupted = False
-        self.complete = False
-        self._partial: Optional[Episode] = None
-        self._t_start: Optional[float] = None
-        #: the training data of the last model fit (``train_model`` skips an identical refit)
-        self.model_trained_on: Optional[Data] = None
-
-    @property
-    def directory(self) -> str:
-        return self.store.directory
 
     def make_env(self):
         """Create (once) and return the environment."""
@@ -114,61 +88,6 @@ class Experiment:
                                     render=self.config.render and self.render_fn is None)
         return self.env
 
-    def episode_seed(self, number: int) -> int:
-        """Seed of episode ``number``'s reset, random actions and optimiser restarts."""
-        return int(self.config.seed) * 1000 + int(number)
-
-    # -- data ---------------------------------------------------------------------------
-    def all_transitions(self) -> Data:
-        """Every collected transition: ``X [N, D+U]``, ``Y [N, D]``, episode order."""
-        pairs = [e.transitions() for e in self.episodes]
-        return np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
-
-    def training_data(self) -> Data:
-        """The model's transitions: episodes from ``train_from_episode`` on (at least the
-        last one), the first ``max_data`` of them."""
-        chosen = self.episodes[self.train_from_episode - 1:] or self.episodes[-1:]
-        pairs = [e.transitions() for e in chosen]
-        X = np.concatenate([p[0] for p in pairs])
-        Y = np.concatenate([p[1] for p in pairs])
-        if self.config.max_data is not None:
-            X, Y = X[: self.config.max_data], Y[: self.config.max_data]
-        return X, Y
-
-    def start_states(self) -> np.ndarray:
-        """First state of every episode so far, ``[E, D]``."""
-        return np.stack([e.states[0] for e in self.episodes])
-
-    # -- saving and resuming ------------------------------------------------------------
-    def _wall(self) -> float:
-        return self.wall_seconds + (time.perf_counter() - self._t_start if self._t_start else 0)
-
-    def save_progress(self) -> None:
-        """Write ``progress.json`` and ``summary.json``."""
-        self.store.save_progress({
-            "config": dataclasses.asdict(self.config),
-            "args": self.args,
-            "episodes_done": len(self.episodes),
-            "records": self.records,
-            "seconds": self.seconds,
-            # process CPU time of the model / policy phases per episode number: a check
-            # on wall times measured on a busy machine
-            "cpu_seconds": self.cpu_seconds,
-            "wall_seconds": self._wall(),
-            "train_from_episode": self.train_from_episode,
-            "summary_fields": self.summary_fields,
-            "interrupted": self.interrupted,
-            "complete": self.complete,
-            "agent_saved": os.path.exists(self.store.agent_path),
-        }, self.summary())
-
-    def save(self) -> None:
-        """Save data first (never lose transitions), then the agent, then progress."""
-        self.store.save_data(self.episodes, self.predictions, self._partial)
-        if self.agent is not None:
-            self.store.save_agent(self.agent)
-        self.save_progress()
-
     @classmethod
     def resume(cls, directory: str, config: ExperimentConfig,
                build_agent: Callable, **kwargs) -> "Experiment":
@@ -179,17 +98,7 @@ class Experiment:
         may differ from the saved one (e.g. more ``episodes``).
         """
         exp = cls(config, directory, build_agent, **kwargs)
-        progress = exp.store.load_progress()
-        records = list(progress["records"])[: int(progress["episodes_done"])]
-        exp.episodes, exp.predictions = exp.store.load_episodes(records)
-        exp.records = records
-        exp.seconds = {p: float(progress["seconds"].get(p, 0.0)) for p in PHASES}
-        exp.wall_seconds = float(progress.get("wall_seconds", 0.0))
-        exp.cpu_seconds = {int(k): v for k, v in progress.get("cpu_seconds", {}).items()}
-        legacy = progress.get("extra", {})  # files written before the typed fields
-        exp.train_from_episode = int(progress.get("train_from_episode",
-                                                  legacy.get("train_from_episode", 1)))
-        exp.summary_fields = dict(progress.get("summary_fields", legacy.get("summary", {})))
+        restore_progress(exp, exp.store.load_progress())
         if len(exp.episodes) >= config.random_episodes:
             agent = exp.store.load_agent()
             if agent is None:
@@ -198,61 +107,6 @@ class Experiment:
             exp.agent = agent
         logger.info("resuming %s after episode %d", directory, len(exp.episodes))
         return exp
-
-    # -- scores -------------------------------------------------------------------------
-    def episode_solved(self, episode: Episode) -> bool:
-        """Whether an episode meets the task's solved rule."""
-        return episode_solved(episode, self.config)
-
-    def solved_at_episode(self) -> Optional[int]:
-        """Number of the first learned episode that solved the task, or None."""
-        for rec, ep in zip(self.records, self.episodes):
-            if not rec["random"] and self.episode_solved(ep):
-                return int(rec["episode"])
-        return None
-
-    def summary(self) -> Dict[str, Any]:
-        """The run's summary (``summary.json``): task, seed, ``solved``,
-        ``solved_at_episode``, the episode records, ``seconds`` per phase and ``total``
-        wall time (all sessions; figures excluded), ``complete`` (the loop finished),
-        ``success`` (the task's rule), ``distances`` per episode and the task's
-        ``summary_fields``."""
-        at = self.solved_at_episode()
-        summary = {
-            "task": self.config.task,
-            "seed": int(self.config.seed),
-            "solved": at is not None,
-            "solved_at_episode": at,
-            "episodes": self.records,
-            "seconds": {**{p: float(self.seconds[p]) for p in PHASES},
-                        "total": float(self._wall())},
-            **self.summary_fields,
-            "complete": bool(self.complete),
-            "distances": [[float(v) for v in e.distances] for e in self.episodes],
-        }
-        summary["success"] = bool(self.success_fn(summary) if self.success_fn
-                                  else summary["solved"])
-        return summary
-
-    # -- one episode --------------------------------------------------------------------
-    def _add_episode(self, episode: Episode, seconds: Dict[str, float],
-                     prediction: Dict[str, np.ndarray]) -> Dict[str, Any]:
-        self.episodes.append(episode)
-        self.predictions.append(prediction)
-        rec = episode_record(episode, len(self.episodes), seconds, self.config)
-        self.records.append(rec)
-        for p in PHASES:
-            self.seconds[p] += float(seconds.get(p, 0.0))
-        self._partial = None
-        if self.agent is not None:
-            self.agent.set_data(self.training_data())
-        self.save()
-        logger.info("episode %d (%s): %d steps, final distance %.4f, min %.4f, cost %.2f, "
-                    "to target %s; %.1f s interaction, %.1f s model, %.1f s policy",
-                    rec["episode"], "random" if rec["random"] else "learned", rec["steps"],
-                    rec["final_distance"], rec["min_distance"], rec["cost"],
-                    rec["steps_to_target"], *(rec["seconds"][p] for p in PHASES))
-        return rec
 
     def _interact(self, number: int, policy_fn, random_action=None) -> Episode:
         """Run episode ``number`` (random when ``policy_fn`` is None); the final episode is
@@ -342,7 +196,7 @@ class Experiment:
                     with interrupts_deferred():
                         self.save()
         finally:
-            self.wall_seconds = self._wall()
+            self.wall_seconds = self.wall()
             self._t_start = None
             with contextlib.suppress(Exception):
                 self.save_progress()
@@ -363,10 +217,3 @@ class Experiment:
             with contextlib.suppress(Exception):
                 self.env.close()
             self.env = None
-
-    def last_frames(self) -> List[np.ndarray]:
-        """Frames of the most recent episode that was rendered (may be empty)."""
-        for ep in reversed(self.episodes):
-            if ep.frames:
-                return ep.frames
-        return []

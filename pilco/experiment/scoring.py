@@ -9,7 +9,7 @@ import numpy as np
 from .config import ExperimentConfig
 from .episode import Episode
 
-__all__ = ["PHASES", "saturating_cost", "episode_solved", "episode_record"]
+__all__ = ["PHASES", "saturating_cost", "episode_solved", "episode_record", "summarise"]
 
 #: the timed phases of a learned episode, as in the paper's timing table
 PHASES = ("interaction", "model", "policy")
@@ -52,3 +52,25 @@ def episode_record(episode: Episode, number: int, seconds: Dict[str, float],
         "steps_to_target": int(within[0] + 1) if len(within) else None,
         "seconds": {p: float(seconds.get(p, 0.0)) for p in PHASES},
     }
+
+
+def summarise(exp) -> Dict[str, Any]:
+    """The summary (``summary.json``) of :class:`~pilco.experiment.Experiment` ``exp``:
+    task, seed, ``solved``, ``solved_at_episode``, the episode records, ``seconds`` per
+    phase and ``total`` wall time (all sessions; figures excluded), the task's
+    ``summary_fields``, ``complete`` (the loop finished), ``distances`` per episode and
+    ``success`` (the task's rule, default ``solved``)."""
+    at = exp.solved_at_episode()
+    summary = {
+        "task": exp.config.task,
+        "seed": int(exp.config.seed),
+        "solved": at is not None,
+        "solved_at_episode": at,
+        "episodes": exp.records,
+        "seconds": {**{p: float(exp.seconds[p]) for p in PHASES}, "total": float(exp.wall())},
+        **exp.summary_fields,
+        "complete": bool(exp.complete),
+        "distances": [[float(v) for v in e.distances] for e in exp.episodes],
+    }
+    summary["success"] = bool(exp.success_fn(summary) if exp.success_fn else summary["solved"])
+    return summary

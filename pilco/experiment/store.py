@@ -16,6 +16,7 @@ data are not in ``data.npz``.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -26,7 +27,7 @@ import numpy as np
 from ..files import write_json_atomic, write_npz_atomic
 from .episode import Episode
 
-__all__ = ["RunStore"]
+__all__ = ["RunStore", "progress_record", "restore_progress"]
 
 logger = logging.getLogger(__name__)
 
@@ -130,3 +131,38 @@ class RunStore:
             return None
         logger.info("resumed the agent from %s", self.agent_path)
         return agent
+
+
+def progress_record(exp) -> Dict[str, Any]:
+    """What ``progress.json`` holds for :class:`~pilco.experiment.Experiment` ``exp``."""
+    return {
+        "config": dataclasses.asdict(exp.config),
+        "args": exp.args,
+        "episodes_done": len(exp.episodes),
+        "records": exp.records,
+        "seconds": exp.seconds,
+        # process CPU time of the model / policy phases per episode number: a check on
+        # wall times measured on a busy machine
+        "cpu_seconds": exp.cpu_seconds,
+        "wall_seconds": exp.wall(),
+        "train_from_episode": exp.train_from_episode,
+        "summary_fields": exp.summary_fields,
+        "interrupted": exp.interrupted,
+        "complete": exp.complete,
+        "agent_saved": os.path.exists(exp.store.agent_path),
+    }
+
+
+def restore_progress(exp, progress: Dict[str, Any]) -> None:
+    """Put a run's saved state (``progress.json`` and the episodes it counts in
+    ``data.npz``) back into ``exp``; reads files written before the typed fields too."""
+    records = list(progress["records"])[: int(progress["episodes_done"])]
+    exp.episodes, exp.predictions = exp.store.load_episodes(records)
+    exp.records = records
+    exp.seconds = {p: float(progress["seconds"].get(p, 0.0)) for p in exp.seconds}
+    exp.wall_seconds = float(progress.get("wall_seconds", 0.0))
+    exp.cpu_seconds = {int(k): v for k, v in progress.get("cpu_seconds", {}).items()}
+    legacy = progress.get("extra", {})
+    exp.train_from_episode = int(progress.get("train_from_episode",
+                                              legacy.get("train_from_episode", 1)))
+    exp.summary_fields = dict(progress.get("summary_fields", legacy.get("summary", {})))

@@ -1,0 +1,141 @@
+"""What a run has collected and how it is saved and scored: :class:`RunRecord`, the
+state half of :class:`~pilco.experiment.loop.Experiment`."""
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from .config import ExperimentConfig
+from .episode import Episode
+from .scoring import PHASES, episode_record, episode_solved, summarise
+from .store import RunStore, progress_record
+
+__all__ = ["RunRecord"]
+
+logger = logging.getLogger(__name__)
+
+Data = Tuple[np.ndarray, np.ndarray]
+
+
+class RunRecord:
+    """The episodes, records, predictions, timings and task state of one run, the agent
+    they trained, and the run directory they are saved to (see :class:`Experiment`).
+
+    Task state that must survive a resume lives in typed attributes:
+    ``train_from_episode`` (1-based: the model learns from this episode on) and
+    ``summary_fields`` (extra fields of the summary, e.g. when a damage happened).
+    """
+
+    def __init__(self, config: ExperimentConfig, directory: str,
+                 args: Optional[Dict[str, Any]] = None,
+                 success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None):
+        self.config = config
+        self.store = RunStore(directory)
+        self.args = dict(args or {})
+        self.success_fn = success_fn
+        self.agent = None
+        self.episodes: List[Episode] = []
+        self.records: List[Dict[str, Any]] = []
+        #: the model's predictions for each episode (empty for random episodes)
+        self.predictions: List[Dict[str, np.ndarray]] = []
+        self.seconds = {p: 0.0 for p in PHASES}
+        self.cpu_seconds: Dict[int, Dict[str, float]] = {}
+        self.wall_seconds = 0.0
+        self.train_from_episode = 1
+        self.summary_fields: Dict[str, Any] = {}
+        self.interrupted = False
+        self.complete = False
+        self._partial: Optional[Episode] = None
+        self._t_start: Optional[float] = None
+        #: the training data of the last model fit (``train_model`` skips an identical refit)
+        self.model_trained_on: Optional[Data] = None
+
+    @property
+    def directory(self) -> str:
+        return self.store.directory
+
+    def episode_seed(self, number: int) -> int:
+        """Seed of episode ``number``'s reset, random actions and optimiser restarts."""
+        return int(self.config.seed) * 1000 + int(number)
+
+    # -- data ---------------------------------------------------------------------------
+    def all_transitions(self) -> Data:
+        """Every collected transition: ``X [N, D+U]``, ``Y [N, D]``, episode order."""
+        pairs = [e.transitions() for e in self.episodes]
+        return np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
+
+    def training_data(self) -> Data:
+        """The model's transitions: episodes from ``train_from_episode`` on (at least the
+        last one), the first ``max_data`` of them."""
+        chosen = self.episodes[self.train_from_episode - 1:] or self.episodes[-1:]
+        pairs = [e.transitions() for e in chosen]
+        X = np.concatenate([p[0] for p in pairs])
+        Y = np.concatenate([p[1] for p in pairs])
+        if self.config.max_data is not None:
+            X, Y = X[: self.config.max_data], Y[: self.config.max_data]
+        return X, Y
+
+    def start_states(self) -> np.ndarray:
+        """First state of every episode so far, ``[E, D]``."""
+        return np.stack([e.states[0] for e in self.episodes])
+
+    # -- saving and resuming ------------------------------------------------------------
+    def wall(self) -> float:
+        """Wall time of the run so far, all sessions."""
+        return self.wall_seconds + (time.perf_counter() - self._t_start if self._t_start else 0)
+
+    def save_progress(self) -> None:
+        """Write ``progress.json`` and ``summary.json``."""
+        self.store.save_progress(progress_record(self), self.summary())
+
+    def save(self) -> None:
+        """Save data first (never lose transitions), then the agent, then progress."""
+        self.store.save_data(self.episodes, self.predictions, self._partial)
+        if self.agent is not None:
+            self.store.save_agent(self.agent)
+        self.save_progress()
+
+    # -- scores -------------------------------------------------------------------------
+    def episode_solved(self, episode: Episode) -> bool:
+        """Whether an episode meets the task's solved rule."""
+        return episode_solved(episode, self.config)
+
+    def solved_at_episode(self) -> Optional[int]:
+        """Number of the first learned episode that solved the task, or None."""
+        for rec, ep in zip(self.records, self.episodes):
+            if not rec["random"] and self.episode_solved(ep):
+                return int(rec["episode"])
+        return None
+
+    def summary(self) -> Dict[str, Any]:
+        """The run's summary (``summary.json``, see :func:`~.scoring.summarise`)."""
+        return summarise(self)
+
+    def _add_episode(self, episode: Episode, seconds: Dict[str, float],
+                     prediction: Dict[str, np.ndarray]) -> Dict[str, Any]:
+        self.episodes.append(episode)
+        self.predictions.append(prediction)
+        rec = episode_record(episode, len(self.episodes), seconds, self.config)
+        self.records.append(rec)
+        for p in PHASES:
+            self.seconds[p] += float(seconds.get(p, 0.0))
+        self._partial = None
+        if self.agent is not None:
+            self.agent.set_data(self.training_data())
+        self.save()
+        logger.info("episode %d (%s): %d steps, final distance %.4f, min %.4f, cost %.2f, "
+                    "to target %s; %.1f s interaction, %.1f s model, %.1f s policy",
+                    rec["episode"], "random" if rec["random"] else "learned", rec["steps"],
+                    rec["final_distance"], rec["min_distance"], rec["cost"],
+                    rec["steps_to_target"], *(rec["seconds"][p] for p in PHASES))
+        return rec
+
+    def last_frames(self) -> List[np.ndarray]:
+        """Frames of the most recent episode that was rendered (may be empty)."""
+        for ep in reversed(self.episodes):
+            if ep.frames:
+                return ep.frames
+        return []
