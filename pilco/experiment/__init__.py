@@ -19,10 +19,10 @@ module             job
 This package logs through :mod:`logging`; only ``cli.finish`` prints (for the scripts).
 """
 from .config import ExperimentConfig
-from .episode import Episode, make_env, rollout
+from .episode import Episode, make_env, rollout, stack_transitions
 from .loop import Experiment
 from .scoring import PHASES, episode_solved, saturating_cost
 from .store import RunStore
 
 __all__ = ["Episode", "Experiment", "ExperimentConfig", "PHASES", "RunStore",
-           "episode_solved", "make_env", "rollout", "saturating_cost"]
+           "episode_solved", "make_env", "rollout", "saturating_cost", "stack_transitions"]

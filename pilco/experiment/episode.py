@@ -10,7 +10,7 @@ import numpy as np
 from .progress import progress_bar
 from .signals import raise_if_stop_requested
 
-__all__ = ["Episode", "rollout", "make_env", "distance_from_info"]
+__all__ = ["Episode", "rollout", "make_env", "distance_from_info", "stack_transitions"]
 
 
 @dataclasses.dataclass
@@ -49,6 +49,12 @@ class Episode:
         X = np.concatenate([self.states[:-1], self.actions], axis=1)
         Y = self.states[1:] - self.states[:-1]
         return X, Y
+
+
+def stack_transitions(episodes) -> Tuple[np.ndarray, np.ndarray]:
+    """The training pairs of ``episodes`` one after the other: ``X [N, D+U]``, ``Y [N, D]``."""
+    pairs = [e.transitions() for e in episodes]
+    return np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
 
 
 def distance_from_info(env, info: Dict[str, Any]) -> float:  # noqa: ARG001 - distance_fn

@@ -9,7 +9,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 import numpy as np
 
 from .config import ExperimentConfig
-from .episode import Episode
+from .episode import Episode, stack_transitions
 from .scoring import PHASES, episode_record, episode_solved, summarise
 from .store import RunStore, progress_record
 
@@ -64,16 +64,13 @@ class RunRecord:
     # -- data ---------------------------------------------------------------------------
     def all_transitions(self) -> Data:
         """Every collected transition: ``X [N, D+U]``, ``Y [N, D]``, episode order."""
-        pairs = [e.transitions() for e in self.episodes]
-        return np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
+        return stack_transitions(self.episodes)
 
     def training_data(self) -> Data:
         """The model's transitions: episodes from ``train_from_episode`` on (at least the
         last one), the first ``max_data`` of them."""
-        chosen = self.episodes[self.train_from_episode - 1:] or self.episodes[-1:]
-        pairs = [e.transitions() for e in chosen]
-        X = np.concatenate([p[0] for p in pairs])
-        Y = np.concatenate([p[1] for p in pairs])
+        X, Y = stack_transitions(self.episodes[self.train_from_episode - 1:]
+                                 or self.episodes[-1:])
         if self.config.max_data is not None:
             X, Y = X[: self.config.max_data], Y[: self.config.max_data]
         return X, Y

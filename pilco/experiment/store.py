@@ -25,7 +25,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..files import write_json_atomic, write_npz_atomic
-from .episode import Episode
+from .episode import Episode, stack_transitions
 
 __all__ = ["RunStore", "progress_record", "restore_progress"]
 
@@ -56,9 +56,7 @@ class RunStore:
         """Rewrite ``data.npz`` with every episode (and the interrupted one's transitions)."""
         arrays: Dict[str, np.ndarray] = {}
         if episodes:
-            pairs = [e.transitions() for e in episodes]
-            arrays["X"] = np.concatenate([p[0] for p in pairs])
-            arrays["Y"] = np.concatenate([p[1] for p in pairs])
+            arrays["X"], arrays["Y"] = stack_transitions(episodes)
             arrays["episode"] = np.concatenate(
                 [np.full(e.steps, i + 1) for i, e in enumerate(episodes)])
         for i, (e, prediction) in enumerate(zip(episodes, predictions), start=1):
