@@ -134,7 +134,8 @@ def test_the_command_line_prints_the_report_and_writes_the_json(run_dir, tmp_pat
 
 
 FAILED = dict(solved=False, start_widths=1.9, pred_solved=False, coverage=0.97,
-              final_inside=True, run_cost=20.0, gain=0.5, better_solves_real=None)
+              worst_dim_coverage=0.9, final_inside=True, optimism=0.5, episode_pred_cost=20.0,
+              run_cost=20.0, gain=0.5, better_solves_real=None)
 
 
 def rule(**changes):
@@ -146,23 +147,35 @@ def test_verdict_rules_in_order_on_synthetic_numbers():
     assert rule(solved=True, coverage=0.1, gain=50.0) == ("solved", 1)
     assert rule(start_widths=3.01) == ("objective: cost flat", 2)
     assert rule(start_widths=2.99) != ("objective: cost flat", 2)
-    # predicted to solve but failed: the one-step coverage decides, before any optimum
+    # predicted to solve but failed: one-step coverage (overall 0.90, worst dimension 0.70)
+    # decides, before any better optimum
     assert rule(pred_solved=True, coverage=0.89, gain=50.0) == ("model", 3)
-    assert rule(pred_solved=True, coverage=0.90, gain=50.0) == ("objective", 3)
+    assert rule(pred_solved=True, worst_dim_coverage=0.69) == ("model", 3)
+    assert rule(pred_solved=True, coverage=0.90, worst_dim_coverage=0.70,
+                gain=50.0, better_solves_real=True) == ("objective", 3)
+    # a clearly better policy that solves on the real system outweighs the model's error
+    assert rule(gain=2.0, better_solves_real=True, optimism=30.0) == ("optimiser", 4)
+    # the model's error about the run's policy (real minus predicted cost) beyond the clear
+    # margin and beyond the re-optimisation gain
+    assert rule(gain=3.0, better_solves_real=False, optimism=3.01) == ("objective", 5)
+    assert rule(optimism=2.0, worst_dim_coverage=0.5) == ("model", 5)
+    assert rule(optimism=1.99) != ("objective", 5)  # within max(1, 10 % of 20)
+    assert rule(gain=3.0, better_solves_real=False, optimism=3.0) == ("optimiser", 6)
     # clearly better: max(1, 10 % of the run's predicted cost)
-    assert rule(gain=2.0) == ("optimiser", 4)
-    assert rule(gain=1.99) != ("optimiser", 4)
-    assert rule(run_cost=5.0, gain=1.0) == ("optimiser", 4)
-    assert rule(run_cost=5.0, gain=0.99) != ("optimiser", 4)
+    assert rule(gain=2.0) == ("optimiser", 6)
+    assert rule(gain=1.99) != ("optimiser", 6)
+    assert rule(run_cost=5.0, gain=1.0) == ("optimiser", 6)
+    assert rule(run_cost=5.0, gain=0.99) != ("optimiser", 6)
     assert "caveat" in verdict({**FAILED, "gain": 3.0, "better_solves_real": False})
-    assert "caveat" not in verdict({**FAILED, "gain": 3.0, "better_solves_real": True})
+    assert "caveat" not in verdict({**FAILED, "gain": 3.0})
     # the model predicts the failure and nothing better was found
-    assert rule(coverage=0.5) == ("model", 5)
-    assert rule(final_inside=False) == ("model", 5)
-    assert rule() == ("objective: optimum short of the target", 5)
-    # without a known cost geometry the distance-based rules are skipped
-    assert rule(start_widths=None, pred_solved=None, final_inside=None) == (
-        "objective: optimum short of the target", 5)
+    assert rule(coverage=0.5) == ("model", 7)
+    assert rule(worst_dim_coverage=0.69) == ("model", 7)
+    assert rule(final_inside=False) == ("model", 7)
+    assert rule() == ("objective: optimum short of the target", 7)
+    # without a known cost geometry the distance- and cost-based rules are skipped
+    assert rule(start_widths=None, pred_solved=None, final_inside=None, optimism=None,
+                episode_pred_cost=None) == ("objective: optimum short of the target", 7)
     strict = Thresholds(coverage=0.99)
     assert verdict(FAILED, strict)["label"] == "model"
 

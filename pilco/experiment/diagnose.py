@@ -25,7 +25,9 @@ Objective
     relative to its maximum (at d = σ_c): ``(d0/σ_c) exp((1 - d0²/σ_c²) / 2)``.
 
 Verdict rules, in this order (the first that holds decides; thresholds in
-:class:`Thresholds`):
+:class:`Thresholds`). "One-step wrong" means a one-step coverage below 0.90 over all state
+dimensions or below 0.70 in some dimension; "clearly better" means a predicted cost lower
+by at least ``max(1, 0.1 * the run's predicted cost)`` (one step at full cost, or a tenth).
 
 1. ``solved``: episode K meets the task's solved rule; nothing failed.
 2. ``objective: cost flat``: d0 > 3 σ_c, i.e. the cost's slope at the start is below
@@ -34,21 +36,24 @@ Verdict rules, in this order (the first that holds decides; thresholds in
    cart-pole's swing-up from 4 σ_c, still gives the expected cost some slope.)
 3. The run's policy was predicted to solve the task (the mean predicted distance meets the
    task's solved rule: within the success threshold at some step, or for the last
-   ``hold_steps`` steps) but the real episode did not: ``model`` if the one-step coverage
-   is below 0.90 (the model is wrong where the system went), else ``objective`` (the model
-   is right step by step, yet the objective, the expected cost of the moment-matched
-   prediction from the start distribution, favoured a policy that does not solve the
-   task).
-4. ``optimiser``: a candidate lowers the run's predicted cost by at least
-   ``max(1, 0.1 * run's predicted cost)`` (one step at full cost, or a tenth): the same
-   model and objective hold a clearly better policy than the one the run found. When the
-   candidates were run on the real system and none of the clearly better ones solves the
-   task, the verdict carries a caveat: the model is optimistic about them too, so a
-   better optimiser alone would not have solved this episode.
-5. Otherwise the model predicts the failure and no clearly better policy was found:
-   ``model`` if the one-step coverage is below 0.90 or the real final distance lies outside
-   the predicted mean ± 2 std at that step, else ``objective: optimum short of the
-   target`` (the model is right and the best policy of this objective stops short).
+   ``hold_steps`` steps) but the real episode did not: ``model`` if one-step wrong (the
+   model is wrong where the system went), else ``objective`` (the model is right step by
+   step, yet the objective, the expected cost of the moment-matched long-term prediction
+   from the start distribution, favoured a policy that does not solve the task).
+4. ``optimiser``, confirmed: the candidates ran on the real system and a clearly better
+   one solves the task: the same model with a better policy search solves this episode.
+5. The model misled the optimiser: the episode's real cost exceeds its predicted cost by
+   the clear margin (``max(1, 0.1 * predicted)``) and by more than the best candidate's
+   gain, so the model's error about the run's own policy outweighs anything re-optimising
+   gains on it: ``model`` if one-step wrong, else ``objective`` (as in rule 3).
+6. ``optimiser``: a clearly better candidate exists. When the candidates ran on the real
+   system and none of the clearly better ones solves the task, the verdict carries a
+   caveat: the model is optimistic about them too, so a better policy search alone would
+   not have solved this episode.
+7. Otherwise the model predicts the failure and no clearly better policy was found:
+   ``model`` if one-step wrong or the real final distance lies outside the predicted
+   mean ± 2 std at that step, else ``objective: optimum short of the target`` (the model
+   is right and the best policy of this objective stops short).
 
 Further evidence goes to ``notes``: whether the best candidate solves the task on the real
 system, whether continuing the run's policy (a larger iteration budget) already helps, and
@@ -87,20 +92,30 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
     - ``solved``: the real episode met the task's solved rule;
     - ``start_widths``: start distance in cost widths (None: unknown cost geometry);
     - ``pred_solved``: the run's policy was predicted to solve the task (None: unknown);
-    - ``coverage``: one-step coverage (fraction of errors within ``z`` predicted std);
+    - ``coverage``, ``worst_dim_coverage``: one-step coverage (fraction of errors within
+      ``z`` predicted std) over all state dimensions and in the worst one;
     - ``final_inside``: the real final distance lies within the predicted ``z`` std;
+    - ``optimism``, ``episode_pred_cost``: the episode's real cost minus its predicted
+      cost, and the predicted cost (over the episode's steps; None: unknown);
     - ``run_cost``, ``gain``: the run's predicted cost and the best candidate's decrease
       of it (None: no candidates);
     - ``better_solves_real``: whether a clearly better candidate solved the task on the
-      real system (None: not run); False adds a ``caveat`` to an ``optimiser`` verdict.
+      real system (None: not run).
 
-    Returns ``{"label", "rule", "reason"}``; ``label`` is one of :data:`VERDICTS`.
+    Returns ``{"label", "rule", "reason"}`` (and ``caveat`` for rule 6); ``label`` is one
+    of :data:`VERDICTS`.
     """
     t = thresholds
-    cov = float(facts["coverage"])
-    model_wrong = cov < t.coverage
-    cov_text = (f"one-step coverage {cov:.0%} {'<' if model_wrong else '>='} "
-                f"{t.coverage:.0%} within ±{t.z:g} std")
+    cov, worst = float(facts["coverage"]), float(facts["worst_dim_coverage"])
+    wrong = t.one_step_wrong(cov, worst)
+    cov_text = (f"one-step coverage {cov:.0%} overall, {worst:.0%} in the worst dimension "
+                f"({'below' if wrong else 'not below'} {t.coverage:.0%} / "
+                f"{t.coverage_dim:.0%})")
+    model_or_objective = "model" if wrong else "objective"
+    gain, run_cost = facts.get("gain"), facts.get("run_cost")
+    better = gain is not None and gain >= t.gain_needed(run_cost)
+    gain_text = (f"a re-optimised policy lowers the predicted cost by {gain:.2f} >= "
+                 f"{t.gain_needed(run_cost):.2f}" if better else "")
     if facts["solved"]:
         return {"label": "solved", "rule": 1, "reason": "the episode solved the task"}
     widths = facts.get("start_widths")
@@ -109,28 +124,34 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
                 "reason": f"start distance {widths:.2f} cost widths > {t.flat_widths:g}: the "
                           f"cost's slope there is {slope_ratio(widths):.1%} of its maximum"}
     if facts.get("pred_solved"):
-        return {"label": "model" if model_wrong else "objective", "rule": 3,
+        return {"label": model_or_objective, "rule": 3,
                 "reason": "the run's policy was predicted to solve the task but did not; "
                           + cov_text}
-    gain, run_cost = facts.get("gain"), facts.get("run_cost")
-    if gain is not None and gain >= t.gain_needed(run_cost):
-        out = {"label": "optimiser", "rule": 4,
-               "reason": f"a re-optimised policy lowers the predicted cost by {gain:.2f} "
-                         f">= {t.gain_needed(run_cost):.2f} (max({t.gain_abs:g}, "
-                         f"{t.gain_rel:.0%} of {run_cost:.2f}))"}
+    if better and facts.get("better_solves_real"):
+        return {"label": "optimiser", "rule": 4,
+                "reason": gain_text + ", and a clearly better policy solves the task on "
+                                      "the real system"}
+    optimism = facts.get("optimism")
+    if (optimism is not None and optimism >= t.gain_needed(facts["episode_pred_cost"])
+            and optimism > (gain or 0.0)):
+        return {"label": model_or_objective, "rule": 5,
+                "reason": f"the episode cost {optimism:.2f} more than predicted, more than "
+                          f"re-optimising gains ({gain or 0.0:.2f}); " + cov_text}
+    if better:
+        out = {"label": "optimiser", "rule": 6, "reason": gain_text}
         if facts.get("better_solves_real") is False:
             out["caveat"] = ("no clearly better policy solves the task on the real system: "
                              "the model is optimistic about them too")
         return out
     inside = facts.get("final_inside")
-    if model_wrong or inside is False:
-        reasons = [cov_text] if model_wrong else []
+    if wrong or inside is False:
+        reasons = [cov_text] if wrong else []
         if inside is False:
             reasons.append(f"the real final distance lies outside the predicted ±{t.z:g} std")
-        return {"label": "model", "rule": 5,
+        return {"label": "model", "rule": 7,
                 "reason": "the model predicts the failure, no clearly better policy was "
                           "found; " + "; ".join(reasons)}
-    return {"label": "objective: optimum short of the target", "rule": 5,
+    return {"label": "objective: optimum short of the target", "rule": 7,
             "reason": "the model predicts the failure correctly (" + cov_text + "; the real "
                       "final distance within the prediction) and no clearly better policy "
                       "was found"}
@@ -159,7 +180,19 @@ def _notes(model, optimiser, reconstruction, rerun_error) -> List[str]:
         solving = [i for i, c in enumerate(cands[1:], 1) if c.get("real_solved")]
         if solving:
             notes.append(f"candidates that solve the task on the real system: {solving}")
+    one = model["one_step"]
+    k = one["worst_dim"]
+    notes.append(f"worst one-step dimension: {k} (coverage {one['worst_dim_coverage']:.0%}, "
+                 f"rms z {one['rms_z_per_dim'][k]:.2f}, first outside ±2 std at step "
+                 f"{one['first_outside_per_dim'][k]})")
+    for i, n in enumerate(one["still_but_predicted_moving_per_dim"]):
+        if n:
+            notes.append(f"dimension {i} did not move on {n} steps where the model predicts it "
+                         f"moves (a limit or a saturation the model does not know)")
     multi = model["multi_step"]
+    if multi.get("optimism") is not None:
+        notes.append(f"the episode's real cost exceeds its predicted cost by "
+                     f"{multi['optimism']:.2f} (predicted {multi['pred_cost_sum']:.2f})")
     if multi.get("coverage") is not None:
         notes.append(f"the real distance lies within the predicted ±2 std on "
                      f"{multi['coverage']:.0%} of the steps")
@@ -198,10 +231,14 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
             logger.warning("the run's policy rerun on the real system took %d steps, the "
                            "episode %d", len(rerun) - 1, ep.steps)
     multi = model["multi_step"]
+    one = model["one_step"]
     facts = {"solved": view.episode_solved(ep), "start_widths": objective["start_widths"],
-             "pred_solved": multi.get("pred_solved"), "coverage": model["one_step"]["coverage"],
-             "final_inside": multi.get("final_inside"), "run_cost": optimiser["run_pred_cost"],
-             "gain": optimiser["gain"], "better_solves_real": optimiser["better_solves_real"]}
+             "pred_solved": multi.get("pred_solved"), "coverage": one["coverage"],
+             "worst_dim_coverage": one["worst_dim_coverage"],
+             "final_inside": multi.get("final_inside"), "optimism": multi.get("optimism"),
+             "episode_pred_cost": multi.get("pred_cost_sum"),
+             "run_cost": optimiser["run_pred_cost"], "gain": optimiser["gain"],
+             "better_solves_real": optimiser["better_solves_real"]}
     result = {
         "directory": exp.directory, "task": exp.config.task, "seed": int(exp.config.seed),
         "episode": number, "episodes": len(exp.episodes),

@@ -34,8 +34,12 @@ class Thresholds:
 
     #: a real value is "within the prediction" if within this many predicted std
     z: float = 2.0
-    #: the model is wrong if fewer one-step errors than this fraction are within ``z`` std
+    #: the model is wrong one step ahead if fewer one-step errors than this fraction are
+    #: within ``z`` std (0.95 for a calibrated Gaussian) ...
     coverage: float = 0.90
+    #: ... or fewer than this fraction in some state dimension (one mispredicted dimension,
+    #: e.g. a joint held at its limit, is diluted in the overall fraction)
+    coverage_dim: float = 0.70
     #: a candidate is clearly better if it lowers the predicted cost by at least
     #: ``max(gain_abs, gain_rel * run's predicted cost)``
     gain_abs: float = 1.0
@@ -44,8 +48,13 @@ class Thresholds:
     flat_widths: float = 3.0
 
     def gain_needed(self, run_cost: float) -> float:
-        """The predicted-cost decrease that counts as clearly better than ``run_cost``."""
+        """The predicted-cost decrease that counts as clearly better than ``run_cost``
+        (also the clear margin of a real cost above its prediction)."""
         return max(self.gain_abs, self.gain_rel * abs(float(run_cost)))
+
+    def one_step_wrong(self, coverage: float, worst_dim_coverage: float) -> bool:
+        """Whether one-step coverages say the model is wrong along the real episode."""
+        return coverage < self.coverage or worst_dim_coverage < self.coverage_dim
 
 
 # -- the cost's geometry --------------------------------------------------------------------
@@ -133,14 +142,24 @@ def one_step_check(agent, episode: Episode, geometry: Optional[CostGeometry],
     z = (Y - mean) / np.sqrt(var)
     within = np.abs(z) <= thresholds.z
     dims = list(geometry.dims) if geometry is not None else []
+    per_dim = within.mean(axis=0)
+    rms_change = np.sqrt(np.mean(Y ** 2, axis=0))
+    # steps where a dimension did not move although the model predicts it moves (a limit or
+    # a saturation the model does not know)
+    still = (np.abs(Y) <= 1e-9 + 1e-6 * rms_change) & (np.abs(mean) > thresholds.z * np.sqrt(var))
+    outside = ~within
     return {
         "coverage": float(within.mean()),
         "coverage_cost_dims": float(within[:, dims].mean()) if dims else None,
         "cost_dims": dims,
-        "coverage_per_dim": within.mean(axis=0),
+        "coverage_per_dim": per_dim,
+        "worst_dim": int(np.argmin(per_dim)), "worst_dim_coverage": float(np.min(per_dim)),
+        "first_outside_per_dim": [int(np.argmax(o)) if o.any() else None for o in outside.T],
+        "still_but_predicted_moving_per_dim": still.sum(axis=0),
+        "wrong": thresholds.one_step_wrong(float(within.mean()), float(np.min(per_dim))),
         "rms_z_per_dim": np.sqrt(np.mean(z ** 2, axis=0)),
         "rmse_per_dim": np.sqrt(np.mean((Y - mean) ** 2, axis=0)),
-        "rms_change_per_dim": np.sqrt(np.mean(Y ** 2, axis=0)),
+        "rms_change_per_dim": rms_change,
         "predicted_std_per_dim": np.sqrt(np.mean(var, axis=0)),
     }
 
@@ -187,6 +206,7 @@ def multi_step_check(exp, agent, episode: Episode, geometry: Optional[CostGeomet
         "pred_cost_sum": float(np.sum(pred["cost"][1:n])),
         "real_cost_sum": float(np.sum(real_cost[1:n])),
     })
+    out["optimism"] = out["real_cost_sum"] - out["pred_cost_sum"]
     return out
 
 

@@ -59,6 +59,10 @@ def format_diagnosis(result: Dict[str, Any], every: int = 5) -> str:
                     if one["cost_dims"] else "")
                  + "; per dim " + " ".join(f"{c:.0%}" for c in cov_dims))
     lines.append("  rms z per dim " + " ".join(f"{z:.2f}" for z in one["rms_z_per_dim"]))
+    k = one["worst_dim"]
+    lines.append(f"  worst dim {k}: first outside ±2 std at step "
+                 f"{one['first_outside_per_dim'][k]}; model wrong one step ahead: "
+                 f"{'yes' if one['wrong'] else 'no'}")
     if "pred_distance_mean" in multi:
         lines += ["", "Model, multi-step from the start distribution under the episode's policy:",
                   f"  {'step':>4} {'pred d':>8} {'± std':>7} {'real d':>8} {'pred cost':>10} "
@@ -77,7 +81,8 @@ def format_diagnosis(result: Dict[str, Any], every: int = 5) -> str:
                      f"{multi['real_min_distance']:.3f}; predicted to solve: "
                      f"{'yes' if multi['pred_solved'] else 'no'}")
         lines.append(f"  cost over the episode's steps: predicted {multi['pred_cost_sum']:.2f}, "
-                     f"real {multi['real_cost_sum']:.2f}")
+                     f"real {multi['real_cost_sum']:.2f} (real - predicted "
+                     f"{multi['optimism']:.2f})")
     lines += ["", f"Optimiser: the policy objective (predicted cost over {opt['horizon']} "
                   f"steps) of the same model, {opt['iterations']} iterations of "
                   f"{opt['method']} per candidate:",
