@@ -13,7 +13,8 @@ import pytest
 from pilco.controllers import RbfController
 from pilco.experiment import Experiment, ExperimentConfig, saturating_cost
 from pilco.experiment.diagnose import VERDICTS, Thresholds, diagnose, verdict, write_diagnosis
-from pilco.experiment.diagnostics import cost_geometry, distance_moments, slope_ratio
+from pilco.experiment.diagnostics import (cost_geometry, distance_moments, mean_dynamics,
+                                          slope_ratio)
 from pilco.experiment.reconstruct import action_error, agent_of_episode
 from pilco.experiment.report import format_diagnosis
 from pilco.models import PILCO
@@ -91,6 +92,9 @@ def test_diagnose_a_run_directory_writes_every_field(run_dir):
     np.testing.assert_allclose(multi["real_cost"], saturating_cost(ep.distances, WIDTH),
                                atol=1e-12)
     assert saved["objective"]["start_widths"] == pytest.approx(2.0, abs=1e-9)
+    # the open loop applies the episode's actions to the model's mean from the real start
+    loop = saved["model"]["open_loop"]
+    assert loop["error"][0] == 0.0 and len(loop["error"]) == ep.steps + 1
     # the run's predicted cost is its policy objective on the episode's model
     agent = PILCO.load(f"{run_dir}/agent.npz")
     X, Y = exp.training_data()
@@ -98,6 +102,11 @@ def test_diagnose_a_run_directory_writes_every_field(run_dir):
     agent.set_data((X[:before], Y[:before]))
     opt = saved["optimiser"]
     assert opt["run_pred_cost"] == pytest.approx(STEPS - agent.expected_return(), rel=1e-9)
+    X3, _ = ep.transitions()
+    mean, _ = agent.one_step_prediction(X3)
+    step = mean_dynamics(agent)
+    np.testing.assert_allclose([step(x[:1], x[1:]) for x in X3], X3[:, :1] + mean, rtol=1e-7)
+    assert loop["distance"][1] == pytest.approx(abs(X3[0, 0] + mean[0, 0] - 1.0), rel=1e-7)
     assert [c["start"] for c in opt["candidates"]] == ["run", "continued", "random"]
     # continuing from the run's policy keeps the best policy evaluated: never worse
     assert opt["candidates"][1]["pred_cost"] <= opt["run_pred_cost"] + 1e-9
@@ -134,8 +143,8 @@ def test_the_command_line_prints_the_report_and_writes_the_json(run_dir, tmp_pat
 
 
 FAILED = dict(solved=False, start_widths=1.9, pred_solved=False, coverage=0.97,
-              worst_dim_coverage=0.9, final_inside=True, optimism=0.5, episode_pred_cost=20.0,
-              run_cost=20.0, gain=0.5, better_solves_real=None)
+              worst_dim_coverage=0.9, open_loop_wrong=False, final_inside=True, optimism=0.5,
+              episode_pred_cost=20.0, run_cost=20.0, gain=0.5, better_solves_real=None)
 
 
 def rule(**changes):
@@ -151,6 +160,8 @@ def test_verdict_rules_in_order_on_synthetic_numbers():
     # decides, before any better optimum
     assert rule(pred_solved=True, coverage=0.89, gain=50.0) == ("model", 3)
     assert rule(pred_solved=True, worst_dim_coverage=0.69) == ("model", 3)
+    # ... or the model's open loop misses the real closest approach by the success distance
+    assert rule(pred_solved=True, open_loop_wrong=True) == ("model", 3)
     assert rule(pred_solved=True, coverage=0.90, worst_dim_coverage=0.70,
                 gain=50.0, better_solves_real=True) == ("objective", 3)
     # a clearly better policy that solves on the real system outweighs the model's error
@@ -171,11 +182,13 @@ def test_verdict_rules_in_order_on_synthetic_numbers():
     # the model predicts the failure and nothing better was found
     assert rule(coverage=0.5) == ("model", 7)
     assert rule(worst_dim_coverage=0.69) == ("model", 7)
+    assert rule(open_loop_wrong=True) == ("model", 7)
     assert rule(final_inside=False) == ("model", 7)
     assert rule() == ("objective: optimum short of the target", 7)
     # without a known cost geometry the distance- and cost-based rules are skipped
     assert rule(start_widths=None, pred_solved=None, final_inside=None, optimism=None,
-                episode_pred_cost=None) == ("objective: optimum short of the target", 7)
+                episode_pred_cost=None, open_loop_wrong=None) == (
+        "objective: optimum short of the target", 7)
     strict = Thresholds(coverage=0.99)
     assert verdict(FAILED, strict)["label"] == "model"
 

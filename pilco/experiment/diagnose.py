@@ -9,6 +9,9 @@ Model
       episode K against the real one, standardised per state dimension (``z = (Δ - mean)
       / std``, the noise variance included). *Coverage* is the fraction of ``|z| <= 2``
       (0.95 for a calibrated Gaussian), over all dimensions and over those the cost reads.
+    - open loop: the episode's own actions applied to the model's mean from the real
+      start; the error is the distance between the model's and the real point the cost
+      measures (the gripper), per step.
     - multi-step: the task distance predicted from the start distribution under episode
       K's policy (mean and std per step, from samples of the moment-matched state
       Gaussians) against the real distance trace, and the predicted against the real cost
@@ -25,9 +28,11 @@ Objective
     relative to its maximum (at d = σ_c): ``(d0/σ_c) exp((1 - d0²/σ_c²) / 2)``.
 
 Verdict rules, in this order (the first that holds decides; thresholds in
-:class:`Thresholds`). "One-step wrong" means a one-step coverage below 0.90 over all state
-dimensions or below 0.70 in some dimension; "clearly better" means a predicted cost lower
-by at least ``max(1, 0.1 * the run's predicted cost)`` (one step at full cost, or a tenth).
+:class:`Thresholds`). "Model wrong" means a one-step coverage below 0.90 over all state
+dimensions or below 0.70 in some dimension, or an open-loop error above the task's success
+distance at the step of the real closest approach (the model cannot tell reaching from
+missing there); "clearly better" means a predicted cost lower by at least
+``max(1, 0.1 * the run's predicted cost)`` (one step at full cost, or a tenth).
 
 1. ``solved``: episode K meets the task's solved rule; nothing failed.
 2. ``objective: cost flat``: d0 > 3 σ_c, i.e. the cost's slope at the start is below
@@ -36,22 +41,23 @@ by at least ``max(1, 0.1 * the run's predicted cost)`` (one step at full cost, o
    cart-pole's swing-up from 4 σ_c, still gives the expected cost some slope.)
 3. The run's policy was predicted to solve the task (the mean predicted distance meets the
    task's solved rule: within the success threshold at some step, or for the last
-   ``hold_steps`` steps) but the real episode did not: ``model`` if one-step wrong (the
-   model is wrong where the system went), else ``objective`` (the model is right step by
-   step, yet the objective, the expected cost of the moment-matched long-term prediction
-   from the start distribution, favoured a policy that does not solve the task).
+   ``hold_steps`` steps) but the real episode did not: ``model`` if model wrong (it is
+   wrong where the system went), else ``objective`` (the model is right about the
+   episode's actions, yet the objective, the expected cost of the moment-matched
+   closed-loop prediction from the start distribution, favoured a policy that does not
+   solve the task).
 4. ``optimiser``, confirmed: the candidates ran on the real system and a clearly better
    one solves the task: the same model with a better policy search solves this episode.
 5. The model misled the optimiser: the episode's real cost exceeds its predicted cost by
    the clear margin (``max(1, 0.1 * predicted)``) and by more than the best candidate's
    gain, so the model's error about the run's own policy outweighs anything re-optimising
-   gains on it: ``model`` if one-step wrong, else ``objective`` (as in rule 3).
+   gains on it: ``model`` if model wrong, else ``objective`` (as in rule 3).
 6. ``optimiser``: a clearly better candidate exists. When the candidates ran on the real
    system and none of the clearly better ones solves the task, the verdict carries a
    caveat: the model is optimistic about them too, so a better policy search alone would
    not have solved this episode.
 7. Otherwise the model predicts the failure and no clearly better policy was found:
-   ``model`` if one-step wrong or the real final distance lies outside the predicted
+   ``model`` if model wrong or the real final distance lies outside the predicted
    mean ± 2 std at that step, else ``objective: optimum short of the target`` (the model
    is right and the best policy of this objective stops short).
 
@@ -74,7 +80,7 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 
 from .diagnostics import (Thresholds, cost_geometry, multi_step_check, objective_check,
-                          one_step_check, optimiser_check, slope_ratio)
+                          one_step_check, open_loop_check, optimiser_check, slope_ratio)
 from .reconstruct import agent_of_episode
 
 __all__ = ["Thresholds", "diagnose", "verdict", "write_diagnosis", "VERDICTS"]
@@ -94,6 +100,8 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
     - ``pred_solved``: the run's policy was predicted to solve the task (None: unknown);
     - ``coverage``, ``worst_dim_coverage``: one-step coverage (fraction of errors within
       ``z`` predicted std) over all state dimensions and in the worst one;
+    - ``open_loop_wrong``: the open-loop error at the real closest approach exceeds the
+      success distance (None: unknown);
     - ``final_inside``: the real final distance lies within the predicted ``z`` std;
     - ``optimism``, ``episode_pred_cost``: the episode's real cost minus its predicted
       cost, and the predicted cost (over the episode's steps; None: unknown);
@@ -107,10 +115,15 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
     """
     t = thresholds
     cov, worst = float(facts["coverage"]), float(facts["worst_dim_coverage"])
-    wrong = t.one_step_wrong(cov, worst)
+    one_step_wrong = t.one_step_wrong(cov, worst)
+    open_loop_wrong = bool(facts.get("open_loop_wrong"))
+    wrong = one_step_wrong or open_loop_wrong
     cov_text = (f"one-step coverage {cov:.0%} overall, {worst:.0%} in the worst dimension "
-                f"({'below' if wrong else 'not below'} {t.coverage:.0%} / "
+                f"({'below' if one_step_wrong else 'not below'} {t.coverage:.0%} / "
                 f"{t.coverage_dim:.0%})")
+    if facts.get("open_loop_wrong") is not None:
+        cov_text += ("; open loop " + ("off by more" if open_loop_wrong else "within")
+                     + " the success distance at the closest approach")
     model_or_objective = "model" if wrong else "objective"
     gain, run_cost = facts.get("gain"), facts.get("run_cost")
     better = gain is not None and gain >= t.gain_needed(run_cost)
@@ -189,6 +202,12 @@ def _notes(model, optimiser, reconstruction, rerun_error) -> List[str]:
         if n:
             notes.append(f"dimension {i} did not move on {n} steps where the model predicts it "
                          f"moves (a limit or a saturation the model does not know)")
+    loop = model["open_loop"]
+    if loop.get("error") is not None:
+        notes.append(f"open loop (the episode's actions on the model's mean): off by "
+                     f"{loop['error_at_closest']:.3f} at the real closest approach (step "
+                     f"{loop['closest_step']}), {loop['max_error']:.3f} at most; above the "
+                     f"success distance from step {loop['first_step_above_threshold']}")
     multi = model["multi_step"]
     if multi.get("optimism") is not None:
         notes.append(f"the episode's real cost exceeds its predicted cost by "
@@ -218,6 +237,7 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
                        type(agent.reward).__name__)
     logger.info("episode %d: model checks", number)
     model = {"one_step": one_step_check(agent, ep, geometry, thresholds),
+             "open_loop": open_loop_check(agent, ep, geometry, exp.config.success_threshold),
              "multi_step": multi_step_check(view, agent, ep, geometry, thresholds)}
     objective = objective_check(agent, ep, geometry, thresholds)
     env = view.make_env() if rollouts else None
@@ -235,6 +255,7 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
     facts = {"solved": view.episode_solved(ep), "start_widths": objective["start_widths"],
              "pred_solved": multi.get("pred_solved"), "coverage": one["coverage"],
              "worst_dim_coverage": one["worst_dim_coverage"],
+             "open_loop_wrong": model["open_loop"]["wrong"],
              "final_inside": multi.get("final_inside"), "optimism": multi.get("optimism"),
              "episode_pred_cost": multi.get("pred_cost_sum"),
              "run_cost": optimiser["run_pred_cost"], "gain": optimiser["gain"],

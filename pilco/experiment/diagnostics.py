@@ -16,8 +16,8 @@ from .episode import Episode, rollout
 from .learning import improve_policy
 
 __all__ = ["Thresholds", "slope_ratio", "CostGeometry", "cost_geometry", "distance_moments",
-           "one_step_check", "predicted_run", "multi_step_check", "objective_check",
-           "optimiser_check"]
+           "one_step_check", "mean_dynamics", "open_loop_check", "predicted_run",
+           "multi_step_check", "objective_check", "optimiser_check"]
 
 logger = logging.getLogger(__name__)
 
@@ -60,49 +60,54 @@ class Thresholds:
 # -- the cost's geometry --------------------------------------------------------------------
 @dataclasses.dataclass
 class CostGeometry:
-    """The task distance a saturating reward measures.
+    """Where a saturating reward puts the target, in task units.
 
-    ``distance(states [N, D]) -> [N]`` in the state's units when the reward's weight matrix
-    is isotropic on the dimensions it reads (``width`` is then σ_c in those units), else in
-    cost widths (``width`` 1); ``dims``: the state dimensions the reward reads;
-    ``max_reward``: the reward at the target (cost = max_reward - reward).
+    ``offset(states [N, D]) -> [N, k]``: the vector from the target to the point the
+    reward measures (the gripper, the pendulum tip), in the state's units when the reward's
+    weight matrix is isotropic on the dimensions it reads (``width`` is then σ_c in those
+    units), else in cost widths (``width`` 1); :meth:`distance` is its length. ``dims``: the
+    state dimensions the reward reads; ``max_reward``: the reward at the target (cost =
+    max_reward - reward).
     """
 
     width: float
     dims: Tuple[int, ...]
-    distance: Callable[[np.ndarray], np.ndarray]
+    offset: Callable[[np.ndarray], np.ndarray]
     max_reward: float = 1.0
+
+    def distance(self, X) -> np.ndarray:
+        """Task distance of states [N, D] -> [N]."""
+        return np.linalg.norm(self.offset(X), axis=1)
 
 
 def cost_geometry(reward) -> Optional[CostGeometry]:
     """The :class:`CostGeometry` of ``ExponentialReward``, ``CartPoleReward`` and
-    ``CombinedRewards`` of them (the widest part's distance); None for other rewards."""
+    ``CombinedRewards`` of them (the widest part's); None for other rewards."""
     from ..rewards import CartPoleReward, CombinedRewards, ExponentialReward
 
     if isinstance(reward, ExponentialReward):
         W, t = np.asarray(reward.W.numpy()), np.asarray(reward.t.numpy())[0]
-        lam = np.linalg.eigvalsh(0.5 * (W + W.T))
-        pos = lam[lam > 1e-12 * max(lam.max(), 1e-300)]
-        iso = len(pos) > 0 and np.allclose(pos, pos[0], rtol=1e-6)
-        width = float(1.0 / np.sqrt(pos[0])) if iso else 1.0
+        lam, V = np.linalg.eigh(0.5 * (W + W.T))
+        keep = lam > 1e-12 * max(lam.max(), 1e-300)
+        iso = keep.any() and np.allclose(lam[keep], lam[keep][0], rtol=1e-6)
+        width = float(1.0 / np.sqrt(lam[keep][0])) if iso else 1.0
+        L = V[:, keep] * np.sqrt(lam[keep])  # W = L L^T on its range
 
-        def distance(X):
-            d = np.asarray(X, dtype=np.float64) - t
-            q = np.einsum("ni,ij,nj->n", d, W, d)
-            return width * np.sqrt(np.maximum(q, 0.0))
+        def offset(X):
+            return width * (np.asarray(X, dtype=np.float64) - t) @ L
 
         dims = tuple(int(i) for i in np.nonzero(np.any(W != 0, axis=1))[0])
-        return CostGeometry(width, dims, distance)
+        return CostGeometry(width, dims, offset)
     if isinstance(reward, CartPoleReward):
         length = float(reward.pendulum_length)
 
-        def tip_distance(X):
+        def tip_offset(X):
             X = np.asarray(X, dtype=np.float64)
-            dx = X[:, 0] + length * np.sin(X[:, 3])
-            dy = length * (np.cos(X[:, 3]) + 1.0)  # tip (x + l sin θ, -l cos θ), target (0, l)
-            return np.hypot(dx, dy)
+            # the tip at (x + l sin θ, -l cos θ), the target at (0, l)
+            return np.stack([X[:, 0] + length * np.sin(X[:, 3]),
+                             -length * (np.cos(X[:, 3]) + 1.0)], axis=1)
 
-        return CostGeometry(float(reward.width), (0, 3), tip_distance)
+        return CostGeometry(float(reward.width), (0, 3), tip_offset)
     if isinstance(reward, CombinedRewards):
         parts = [cost_geometry(r) for r in reward.base_rewards]
         if any(p is None for p in parts):
@@ -162,6 +167,47 @@ def one_step_check(agent, episode: Episode, geometry: Optional[CostGeometry],
         "rms_change_per_dim": rms_change,
         "predicted_std_per_dim": np.sqrt(np.mean(var, axis=0)),
     }
+
+
+def mean_dynamics(agent) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``(x [D], u [U]) -> x + mean predicted change``: the dynamics model's mean as a
+    NumPy function (one factorisation, then a kernel row per call)."""
+    f = agent.mgpr.factorize()
+    C, B, ell, sf2 = (np.asarray(v, dtype=np.float64)
+                      for v in (f.centers, f.beta, f.lengthscales, f.variance))
+
+    def step(x, u):
+        z = agent.gp_inputs(np.concatenate([x, u])[None])[0]
+        k = sf2[:, None] * np.exp(-0.5 * np.sum(((z - C)[None] / ell[:, None, :]) ** 2, -1))
+        return x + np.sum(k * B, axis=1)
+
+    return step
+
+
+def open_loop_check(agent, episode: Episode, geometry: Optional[CostGeometry],
+                    threshold: float) -> Dict[str, Any]:
+    """The episode's own actions applied to the model's mean from the episode's real start:
+    how far the model's trajectory drifts from the real one (no policy, no uncertainty).
+
+    ``error``: per step, the distance between the model's and the real point the cost
+    measures; ``wrong``: at the step of the real closest approach the error exceeds
+    ``threshold`` (the task's success distance: the model cannot tell reaching from
+    missing there).
+    """
+    if geometry is None or episode.steps == 0:
+        return {"wrong": None}
+    step = mean_dynamics(agent)
+    xs = [np.asarray(episode.states[0], dtype=np.float64)]
+    for u in episode.actions:
+        xs.append(step(xs[-1], u))
+    xs = np.array(xs)
+    error = np.linalg.norm(geometry.offset(xs) - geometry.offset(episode.states), axis=1)
+    closest = int(np.argmin(episode.distances[1:])) + 1
+    above = np.nonzero(error > threshold)[0]
+    return {"distance": geometry.distance(xs), "error": error, "closest_step": closest,
+            "error_at_closest": float(error[closest]), "max_error": float(error.max()),
+            "first_step_above_threshold": int(above[0]) if len(above) else None,
+            "threshold": float(threshold), "wrong": bool(error[closest] > threshold)}
 
 
 def predicted_run(agent, steps: int, geometry: Optional[CostGeometry]) -> Dict[str, Any]:

@@ -63,17 +63,28 @@ def format_diagnosis(result: Dict[str, Any], every: int = 5) -> str:
     lines.append(f"  worst dim {k}: first outside ±2 std at step "
                  f"{one['first_outside_per_dim'][k]}; model wrong one step ahead: "
                  f"{'yes' if one['wrong'] else 'no'}")
+    loop = result["model"]["open_loop"]
+    if loop.get("error") is not None:
+        lines += ["", "Model, open loop (the episode's actions on the model's mean from the real "
+                      "start):",
+                  f"  off by {loop['error_at_closest']:.3f} at the real closest approach (step "
+                  f"{loop['closest_step']}; success distance {loop['threshold']:g}), "
+                  f"{loop['max_error']:.3f} at most; model distance at the end "
+                  f"{loop['distance'][-1]:.3f}; model wrong there: "
+                  f"{'yes' if loop['wrong'] else 'no'}"]
     if "pred_distance_mean" in multi:
         lines += ["", "Model, multi-step from the start distribution under the episode's policy:",
-                  f"  {'step':>4} {'pred d':>8} {'± std':>7} {'real d':>8} {'pred cost':>10} "
-                  f"{'real cost':>10}"]
+                  f"  {'step':>4} {'pred d':>8} {'± std':>7} {'real d':>8} {'open-loop d':>12} "
+                  f"{'pred cost':>10} {'real cost':>10}"]
+        open_d = loop.get("distance")
         pm, ps, rd = multi["pred_distance_mean"], multi["pred_distance_std"], multi["real_distance"]
         pc, rc = multi["pred_cost"], multi["real_cost"]
         for t in sorted(set(range(0, len(pm), every)) | {len(pm) - 1}):
             real = t < len(rd)
             lines.append(f"  {t:>4} {pm[t]:>8.3f} {ps[t]:>7.3f} "
-                         f"{_f(rd[t] if real else None):>8} {pc[t]:>10.3f} "
-                         f"{_f(rc[t] if real else None):>10}")
+                         f"{_f(rd[t] if real else None):>8} "
+                         f"{_f(open_d[t] if real and open_d is not None else None):>12} "
+                         f"{pc[t]:>10.3f} {_f(rc[t] if real else None):>10}")
         lines.append(f"  final distance: predicted {multi['pred_final_distance']:.3f} ± "
                      f"{multi['pred_final_std']:.3f}, real {multi['real_final_distance']:.3f} "
                      f"({'inside' if multi['final_inside'] else 'outside'} ±2 std); closest: "
