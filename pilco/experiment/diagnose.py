@@ -122,8 +122,8 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
                 f"({'below' if one_step_wrong else 'not below'} {t.coverage:.0%} / "
                 f"{t.coverage_dim:.0%})")
     if facts.get("open_loop_wrong") is not None:
-        cov_text += ("; open loop " + ("off by more" if open_loop_wrong else "within")
-                     + " the success distance at the closest approach")
+        cov_text += ("; the open loop is off by " + ("more" if open_loop_wrong else "less")
+                     + " than the success distance at the real closest approach")
     model_or_objective = "model" if wrong else "objective"
     gain, run_cost = facts.get("gain"), facts.get("run_cost")
     better = gain is not None and gain >= t.gain_needed(run_cost)
