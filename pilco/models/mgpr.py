@@ -32,6 +32,7 @@ import numpy as np
 import tensorflow as tf
 
 from .. import moments
+from ..seeding import generator
 from ..snapshots import Stalled, TrackingScipy, restore, snapshot
 from ..validation import (
     check_data,
@@ -106,7 +107,8 @@ class MGPR(gpflow.base.Module):
         of the trainable ones only.
         """
         X = self._X.numpy()
-        rng = rng or np.random.default_rng()
+        if rng is None and spread:
+            rng = generator()
         ell0 = np.std(X, axis=0) if len(X) > 1 else np.ones(self.num_dims)
         # a constant input (a joint that never moves) carries no scale: start it at 1
         ell0 = np.where(ell0 > 1e-8, np.maximum(ell0, 1e-3), 1.0)
@@ -114,7 +116,8 @@ class MGPR(gpflow.base.Module):
             y = self._Y[i].numpy()
             var = float(np.var(y)) if len(y) > 1 else 1.0
             var = max(var, 1e-6)
-            jitter = lambda size: np.exp(spread * rng.standard_normal(size))  # noqa: E731
+            jitter = lambda size: (np.exp(spread * rng.standard_normal(size))  # noqa: E731
+                                   if spread else np.ones(size))
             _assign_free(model.kernel.lengthscales, ell0 * jitter(self.num_dims))
             _assign_free(model.kernel.variance, var * jitter(1)[0])
             _assign_free(model.likelihood.variance,
@@ -240,7 +243,7 @@ class MGPR(gpflow.base.Module):
         restarts = check_positive_int(restarts, "restarts")
         patience = check_positive_int(patience, "patience")
         min_rel_improvement = check_min_rel_improvement(min_rel_improvement)
-        rng = np.random.default_rng(check_seed(seed))
+        rng = generator(check_seed(seed))
         opt = self._optimizer  # one instance: its compiled objective is reused across calls
         groups = self._selection_groups()
         best_losses = [np.inf] * len(groups)
