@@ -94,3 +94,92 @@ def test_np_random_seed_makes_a_paper_script_repeatable():
     for a, b in zip(first, again):
         np.testing.assert_array_equal(a, b)
     assert not np.allclose(first[1], other[1])
+
+
+def test_construction_action_and_prediction_mean_what_the_paper_script_expects():
+    """``PILCO((X, Y), controller=, horizon=, reward=, m_init=, S_init=)`` on float32
+    data; ``compute_action(x[None, :])`` is the policy's action [1, U] at a known state;
+    ``predict(m, S, T)`` is the state after T steps, its covariance and the total
+    expected reward of steps 1..T."""
+    X, Y = transitions()
+    pilco = paper_agent((X, Y), horizon=3)
+    assert (pilco.state_dim, pilco.control_dim, pilco.horizon) == (3, 1, 3)
+    np.testing.assert_array_equal(pilco.m_init, M_INIT)
+    np.testing.assert_array_equal(pilco.S_init, S_INIT)
+    np.testing.assert_array_equal(pilco.data[0], X.astype(np.float64))
+
+    x = X[0, :3]
+    u = pilco.compute_action(x[None, :])
+    assert isinstance(u, np.ndarray) and u.shape == (1, 1)
+    expected, _, _ = pilco.controller.compute_action(x[None, :].astype(np.float64),
+                                                    np.zeros((3, 3)))
+    np.testing.assert_allclose(u, expected.numpy(), rtol=1e-10)
+    assert abs(u[0, 0]) <= 2.0  # max_action
+    assert pilco.compute_action(x[None, :])[0, :].shape == (1,)  # the script's policy line
+
+    m, S, total = pilco.predict(M_INIT, S_INIT, 3)
+    assert tuple(m.shape) == (1, 3) and tuple(S.shape) == (3, 3)
+    assert tuple(total.shape) == (1, 1)
+    mi, si, summed = M_INIT, S_INIT, 0.0
+    for _ in range(3):
+        mi, si = pilco.propagate(mi, si)
+        summed += float(pilco.reward.compute_reward(mi, si)[0][0, 0])
+    np.testing.assert_allclose(m, mi, rtol=1e-8)
+    np.testing.assert_allclose(S, si, rtol=1e-8, atol=1e-12)
+    assert float(total[0, 0]) == pytest.approx(summed, rel=1e-8)
+
+    # the reward as the script checks it by inspection: mean and variance, 1 at the target
+    r, v = pilco.reward.compute_reward(TARGET[None, :], 1e-9 * np.eye(3))
+    assert float(r[0, 0]) == pytest.approx(1.0, abs=1e-6) and float(v[0, 0]) > -1e-12
+
+
+def test_optimizers_take_maxiter_and_restarts():
+    """``optimize_models(maxiter=, restarts=)`` and ``optimize_policy(maxiter=,
+    restarts=)``: at most ``maxiter`` iterations per run, ``restarts`` runs in all, each
+    further run from a new random start; the policy ends at least as good as it began."""
+    pilco = paper_agent()
+    iterations = []
+    pilco.optimize_models(maxiter=2, restarts=2, callback=iterations.append)
+    assert 2 < len(iterations) <= 4  # two runs of at most 2 iterations
+
+    draws = []
+    randomize = pilco.controller.randomize
+    pilco.controller.randomize = lambda *a, **k: (draws.append(1), randomize(*a, **k))
+    before = pilco.expected_return()
+    iterations.clear()
+    best = pilco.optimize_policy(maxiter=2, restarts=2, callback=iterations.append)
+    assert len(draws) == 1  # the second run starts from a random policy
+    assert 2 < len(iterations) <= 4
+    assert best >= before - 1e-9
+    assert pilco.expected_return() == pytest.approx(best, rel=1e-9)
+
+
+def test_data_added_through_mgpr_set_data_are_what_the_agent_sees(tmp_path):
+    """The paper's scripts add data with ``pilco.mgpr.set_data((X, Y))``: ``pilco.data``,
+    the saved file, the loaded agent, its predictions and the model's evidence all see
+    every transition."""
+    X, Y = transitions(12)
+    pilco = paper_agent((X, Y))
+    fix_noise(pilco)
+    X_new, Y_new = transitions(8, seed=1)
+    X, Y = np.vstack((X, X_new)), np.vstack((Y, Y_new))
+    pilco.mgpr.set_data((X, Y))
+
+    data_X, data_Y = pilco.data
+    assert len(data_X) == 20
+    np.testing.assert_array_equal(data_X, X.astype(np.float64))
+    np.testing.assert_array_equal(data_Y, Y.astype(np.float64))
+    assert pilco.mgpr.X.shape[0] == 20
+
+    path = pilco.save(tmp_path / "agent.npz")
+    with np.load(path) as stored:
+        np.testing.assert_array_equal(stored["data/X"], data_X)
+        np.testing.assert_array_equal(stored["data/Y"], data_Y)
+    loaded = PILCO.load(path)
+    np.testing.assert_array_equal(loaded.data[0], data_X)
+    np.testing.assert_allclose(loaded.mgpr.log_marginal_likelihood(),
+                               pilco.mgpr.log_marginal_likelihood(), rtol=1e-10)
+    assert all(float(m.likelihood.variance.numpy()) == pytest.approx(1e-3)
+               and not m.likelihood.variance.trainable for m in loaded.mgpr.models)
+    for a, b in zip(pilco.predict(M_INIT, S_INIT, 3), loaded.predict(M_INIT, S_INIT, 3)):
+        np.testing.assert_allclose(a, b, rtol=1e-8)
