@@ -7,6 +7,11 @@ iterations.
 """
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
+
 import gpflow
 import numpy as np
 import pytest
@@ -16,6 +21,7 @@ from pilco.controllers import RbfController
 from pilco.models import PILCO
 from pilco.rewards import ExponentialReward
 
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 M_INIT = np.reshape([-1.0, 0.0, 0.0], (1, 3))
 S_INIT = np.diag([0.01, 0.05, 0.01])
 TARGET = np.array([1.0, 0.0, 0.0])
@@ -70,30 +76,23 @@ def test_fixed_noise_stays_fixed_through_model_restarts():
 
 
 def test_np_random_seed_makes_a_paper_script_repeatable():
-    """The paper's scripts start with ``np.random.seed(0)``: the unseeded draws (initial
-    policy, model and policy restarts) then repeat; another seed draws other values."""
-    def new_controller(seed):
+    """The paper's scripts start with ``np.random.seed(0)``: the unseeded draws (the
+    initial policy, the random starts of policy and model restarts) then repeat; another
+    seed draws other values."""
+    pilco = paper_agent()
+
+    def draws(seed):
         np.random.seed(seed)
-        return RbfController(state_dim=3, control_dim=1, num_basis_functions=2).centers.numpy()
+        controller = RbfController(state_dim=3, control_dim=1, num_basis_functions=2)
+        pilco.controller.randomize()  # what optimize_policy's restarts call
+        pilco.mgpr.initialize_hyperparameters(spread=0.5)  # optimize_models' restarts
+        return (controller.centers.numpy(), pilco.controller.centers.numpy().copy(),
+                pilco.mgpr.hyperparameters()[0].numpy())
 
-    np.testing.assert_array_equal(new_controller(3), new_controller(3))
-    assert not np.allclose(new_controller(3), new_controller(4))
-
-    pilco = paper_agent()  # one agent: its compiled rollout is traced once
-    start = (gpflow.utilities.read_values(pilco.mgpr), gpflow.utilities.read_values(pilco.controller))
-
-    def train(seed):
-        gpflow.utilities.multiple_assign(pilco.mgpr, start[0])
-        gpflow.utilities.multiple_assign(pilco.controller, start[1])
-        np.random.seed(seed)
-        pilco.optimize_models(maxiter=2, restarts=2)
-        pilco.optimize_policy(maxiter=2, restarts=2)
-        return pilco.mgpr.hyperparameters()[0].numpy(), pilco.controller.centers.numpy()
-
-    first, again, other = train(3), train(3), train(4)
-    for a, b in zip(first, again):
+    first, again, other = draws(3), draws(3), draws(4)
+    for a, b, c in zip(first, again, other):
         np.testing.assert_array_equal(a, b)
-    assert not np.allclose(first[1], other[1])
+        assert not np.allclose(a, c)
 
 
 def test_construction_action_and_prediction_mean_what_the_paper_script_expects():
@@ -133,7 +132,7 @@ def test_construction_action_and_prediction_mean_what_the_paper_script_expects()
     assert float(r[0, 0]) == pytest.approx(1.0, abs=1e-6) and float(v[0, 0]) > -1e-12
 
 
-def test_optimizers_take_maxiter_and_restarts():
+def test_optimizers_take_maxiter_and_restarts(monkeypatch):
     """``optimize_models(maxiter=, restarts=)`` and ``optimize_policy(maxiter=,
     restarts=)``: at most ``maxiter`` iterations per run, ``restarts`` runs in all, each
     further run from a new random start; the policy ends at least as good as it began."""
@@ -144,7 +143,8 @@ def test_optimizers_take_maxiter_and_restarts():
 
     draws = []
     randomize = pilco.controller.randomize
-    pilco.controller.randomize = lambda *a, **k: (draws.append(1), randomize(*a, **k))
+    monkeypatch.setattr(pilco.controller, "randomize",
+                        lambda *a, **k: (draws.append(1), randomize(*a, **k)))
     before = pilco.expected_return()
     iterations.clear()
     best = pilco.optimize_policy(maxiter=2, restarts=2, callback=iterations.append)
@@ -183,3 +183,70 @@ def test_data_added_through_mgpr_set_data_are_what_the_agent_sees(tmp_path):
                and not m.likelihood.variance.trainable for m in loaded.mgpr.models)
     for a, b in zip(pilco.predict(M_INIT, S_INIT, 3), loaded.predict(M_INIT, S_INIT, 3)):
         np.testing.assert_allclose(a, b, rtol=1e-8)
+
+
+# ------------------------------------------------ examples/pendulum.py and its sweep task
+@pytest.fixture(scope="module")
+def pendulum_runs(tmp_path_factory):
+    """``examples/pendulum.py`` and ``python -m pilco.tasks pendulum`` with tiny settings,
+    started together; ``{name: (directory, returncode, output)}``."""
+    base = tmp_path_factory.mktemp("pendulum")
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""),
+               TF_CPP_MIN_LOG_LEVEL="3", OMP_NUM_THREADS="1")
+    commands = {
+        "example": [os.path.join(ROOT, "examples", "pendulum.py"), "--iterations", "1",
+                    "--rollout-steps", "5", "--basis-functions", "2", "--maxiter", "2",
+                    "--quiet", "--seed", "1", "--output", str(base / "example" / "agent.npz")],
+        "task": ["-m", "pilco.tasks", "pendulum", "--episodes", "2", "--random-episodes", "1",
+                 "--horizon", "5", "--basis-functions", "2", "--policy-iters", "2",
+                 "--model-iters", "2", "--quiet", "--output", str(base / "task")],
+    }
+    procs = {name: subprocess.Popen([sys.executable, *cmd], cwd=ROOT, env=env, text=True,
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+             for name, cmd in commands.items()}
+    out = {}
+    for name, proc in procs.items():
+        text, _ = proc.communicate(timeout=600)
+        out[name] = (base / name, proc.returncode, text)
+    return out
+
+
+def test_pendulum_example_keeps_every_transition(pendulum_runs):
+    """The paper-style script runs unchanged: 4 random rollouts and 1 learned one of 5
+    steps, data added with ``pilco.mgpr.set_data``, all 25 transitions in the saved agent."""
+    d, code, out = pendulum_runs["example"]
+    assert code == 0, out[-3000:]
+    assert "seed 1: up first at iteration None, up in the last: False; 25 transitions" in out
+    assert "iteration 1: return" in out  # the script's per-iteration line
+    with np.load(d / "agent.npz") as agent:
+        X, Y = agent["data/X"], agent["data/Y"]
+        meta = json.loads(str(agent["__meta__"]))
+        noise = agent["gp/noise"]
+    assert X.shape == (25, 4) and Y.shape == (25, 3)
+    for start in range(0, 25, 5):  # rollouts of 5 steps, each starting hanging down
+        rows = slice(start, start + 5)
+        assert X[start, 0] < -0.99
+        np.testing.assert_allclose(X[rows][1:, :3], X[rows][:-1, :3] + Y[rows][:-1], atol=1e-6)
+    assert np.all(np.abs(X[:, 3]) <= 2.0)
+    np.testing.assert_allclose(noise, 1e-3)
+    assert meta["trainable"]["gp/noise"] == [False, False, False]
+
+
+def test_pendulum_task_summary_for_the_sweep(pendulum_runs):
+    d, code, out = pendulum_runs["task"]
+    assert code == 0, out[-3000:]
+    with open(d / "summary.json", encoding="utf-8") as f:
+        s = json.load(f)
+    assert s["task"] == "pendulum" and s["complete"] is True
+    assert [e["random"] for e in s["episodes"]] == [True, False]
+    assert [len(x) for x in s["distances"]] == [6, 6]
+    assert all(x[0] > 2.5 for x in s["distances"])  # every episode starts hanging down
+    last = np.asarray(s["distances"][-1][1:])
+    assert s["success"] == bool(np.all(last[-10:] < 0.3) and len(last) >= 10)
+    assert s["success"] is False  # 5 steps cannot hold the pendulum up for 10
+    with np.load(d / "data.npz") as data:
+        assert data["X"].shape == (10, 4)
+    with np.load(d / "agent.npz") as agent:
+        np.testing.assert_allclose(agent["gp/noise"], 1e-3)
+    for name in ("distance.png", "one_step.png", "final_episode.gif"):
+        assert (d / name).exists(), name
