@@ -9,8 +9,9 @@
   to continue with the next episode;
 - ``summary.json``: the run's summary.
 
-Each file is written atomically (:mod:`pilco.files`), in the order data, agent,
-progress: a run stopped at any moment (even by SIGKILL) leaves every file either in its
+Each file is written atomically (:mod:`pilco.files`): ``progress.json`` (0 episodes)
+when a run starts, then after every episode in the order data, agent, progress. A run
+stopped at any moment (even by SIGKILL) leaves every file either in its
 old or its new complete version, and ``progress.json`` never counts an episode whose
 data are not in ``data.npz``.
 """
@@ -98,6 +99,8 @@ class RunStore:
         """The episodes counted in ``records`` (from ``progress.json``) and their
         predictions, read from ``data.npz``."""
         episodes, predictions = [], []
+        if not records:  # progress written before the first episode's data
+            return episodes, predictions
         with np.load(self.data_path) as data:
             for i, record in enumerate(records, start=1):
                 missing = [k for k in ("states", "actions", "rewards", "distances")
