@@ -91,6 +91,21 @@ def test_a_refused_cartpole_reset_changes_nothing():
     np.testing.assert_array_equal(b.reset()[0], a.reset()[0])  # the same random stream
 
 
+def test_the_pendulum_has_no_reset_options_and_a_refused_reset_changes_nothing():
+    from pilco.envs import PendulumSwingUp
+
+    a, b = PendulumSwingUp(), PendulumSwingUp()
+    a.reset(seed=3)
+    b.reset(seed=3)
+    for kwargs, exc, match in RESET_BAD + [({"options": {"state": [0.0, 0.0]}}, ValueError,
+                                            r"Unknown reset options \['state'\]")]:
+        with pytest.raises(exc, match=match):
+            b.reset(**{"seed": 9, **kwargs})
+    np.testing.assert_array_equal(b.pendulum.state, a.pendulum.state)
+    np.testing.assert_array_equal(b.reset()[0], a.reset()[0])
+    np.testing.assert_array_equal(b.reset(options={})[0], a.reset(options=None)[0])
+
+
 def test_cartpole_reset_options_that_work():
     env = CartPoleSwingUp(noise_std=0.0)
     for options in (None, {}):

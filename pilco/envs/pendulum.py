@@ -69,8 +69,9 @@ class PendulumSwingUp(gymnasium.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Hang the pendulum down (with ``start_std`` noise); returns ``(obs [3], info)``."""
-        super().reset(seed=check.seed(seed))
-        check.reset_options(options, ())
+        seed = check.seed(seed)
+        check.reset_options(options, ())  # checked before the seed is used
+        super().reset(seed=seed)
         noise = self.start_std * self.np_random.standard_normal(2)
         self.pendulum.state = np.array([np.pi + noise[0], noise[1]])
         self.pendulum.last_u = None
