@@ -95,14 +95,14 @@ def time_objective(problem: str, repeats: int, cartpole_data: int):
     import tensorflow as tf
 
     agent = build(problem, cartpole_data=cartpole_data)
-    agent._refresh_dynamics()
+    agent._rollout.refresh(agent.mgpr)
     _, trace, seconds = _time_loss_and_gradient(
-        agent._policy_loss, agent.controller.trainable_variables, repeats,
+        agent._rollout.policy_loss, agent.controller.trainable_variables, repeats,
         dict(autograph=False))
 
     @tf.function
     def forward():
-        return agent._policy_loss()
+        return agent._rollout.policy_loss()
 
     forward()
     fwd = []
@@ -124,12 +124,12 @@ def time_baseline(problem: str, repeats: int, cartpole_data: int):
     from naive_port import make_objective
 
     agent = build(problem, cartpole_data=cartpole_data)
-    agent._refresh_dynamics()
-    ours = float(agent._policy_loss().numpy())
+    agent._rollout.refresh(agent.mgpr)
+    ours = float(agent._rollout.policy_loss().numpy())
     naive, trace, seconds = _time_loss_and_gradient(
         make_objective(agent), agent.controller.trainable_variables, repeats, {})
     fresh = build(problem, cartpole_data=cartpole_data)
-    fresh._refresh_dynamics()
+    fresh._rollout.refresh(fresh.mgpr)
     t0 = time.perf_counter()
     gpflow.optimizers.Scipy().minimize(make_objective(fresh), fresh.controller.trainable_variables,
                                        method="L-BFGS-B", options=dict(maxiter=10))
