@@ -18,6 +18,15 @@ Usage::
     python benchmarks/bench_policy.py                   # both problems, table + JSON
     python benchmarks/bench_policy.py --problem reacher --repeats 20 --json out.json
     python benchmarks/bench_policy.py --baseline      # also time naive_port.py's port
+    python benchmarks/bench_policy.py --problem reacher \
+        --port /path/to/PILCO --port-python /path/to/port-venv/bin/python
+
+``--port`` times the reference GPflow port (a checkout of nrontsis/PILCO, run by
+``port_policy.py`` in a fresh process of its own environment given by ``--port-python``)
+side by side with this library on the reacher problem: ``--port-repeats`` rounds, each
+one fresh process of this library's ``optimize_policy(maxiter=10)`` and one of the
+port's, on the same transitions, hyperparameters, reward, start and initial policy;
+medians and their ratio are reported.
 """
 from __future__ import annotations
 
@@ -95,14 +104,14 @@ def time_objective(problem: str, repeats: int, cartpole_data: int):
     import tensorflow as tf
 
     agent = build(problem, cartpole_data=cartpole_data)
-    agent._refresh_dynamics()
+    agent._rollout.refresh(agent.mgpr)
     _, trace, seconds = _time_loss_and_gradient(
-        agent._policy_loss, agent.controller.trainable_variables, repeats,
+        agent._rollout.policy_loss, agent.controller.trainable_variables, repeats,
         dict(autograph=False))
 
     @tf.function
     def forward():
-        return agent._policy_loss()
+        return agent._rollout.policy_loss()
 
     forward()
     fwd = []
@@ -124,12 +133,12 @@ def time_baseline(problem: str, repeats: int, cartpole_data: int):
     from naive_port import make_objective
 
     agent = build(problem, cartpole_data=cartpole_data)
-    agent._refresh_dynamics()
-    ours = float(agent._policy_loss().numpy())
+    agent._rollout.refresh(agent.mgpr)
+    ours = float(agent._rollout.policy_loss().numpy())
     naive, trace, seconds = _time_loss_and_gradient(
         make_objective(agent), agent.controller.trainable_variables, repeats, {})
     fresh = build(problem, cartpole_data=cartpole_data)
-    fresh._refresh_dynamics()
+    fresh._rollout.refresh(fresh.mgpr)
     t0 = time.perf_counter()
     gpflow.optimizers.Scipy().minimize(make_objective(fresh), fresh.controller.trainable_variables,
                                        method="L-BFGS-B", options=dict(maxiter=10))
@@ -162,6 +171,56 @@ def optimize_fresh(problem: str, cartpole_data: int):
     return {"optimize_policy_maxiter10_seconds": secs, "peak_memory_mb": peak_mb}
 
 
+def write_problem(agent, path: str) -> None:
+    """The agent's problem as arrays for ``port_policy.py`` (no pilco needed to read it)."""
+    ctrl = agent.controller
+    ell, sf2, sn2 = agent.mgpr.hyperparameters()
+    np.savez(path, X=agent.mgpr.X.numpy(), Y=agent.mgpr.Y.numpy(),
+             lengthscales=ell.numpy(), variance=sf2.numpy(), noise=sn2.numpy(),
+             W=agent.reward.W.numpy(), t=agent.reward.t.numpy(), m_init=agent.m_init,
+             S_init=agent.S_init, horizon=agent.horizon, centers=ctrl.centers.numpy(),
+             targets=ctrl.targets.numpy(),
+             policy_lengthscales=np.stack([m.kernel.lengthscales.numpy() for m in ctrl.models]),
+             max_action=float(np.max(np.asarray(ctrl.max_action))))  # one bound in the port
+
+
+def _fresh_ours(problem: str, cartpole_data: int) -> dict:
+    out = subprocess.run(
+        [sys.executable, __file__, "--_fresh", problem, "--cartpole-data", str(cartpole_data)],
+        capture_output=True, text=True, check=True,
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def time_port(port: str, python: str, repeats: int) -> dict:
+    """Fresh processes of this library's and the port's ``optimize_policy(maxiter=10)`` on
+    the reacher problem, interleaved; medians and their ratio."""
+    import tempfile
+
+    agent = build("reacher")
+    script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "port_policy.py")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}  # the port's pilco only
+    ours, theirs = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        problem = os.path.join(tmp, "reacher.npz")
+        write_problem(agent, problem)
+        for _ in range(repeats):
+            ours.append(_fresh_ours("reacher", 0)["optimize_policy_maxiter10_seconds"])
+            out = subprocess.run([python, script, problem, "--port", port],
+                                 capture_output=True, text=True, env=env)
+            if out.returncode != 0:
+                raise RuntimeError(f"the port's run failed:\n{out.stderr[-3000:]}")
+            theirs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    port_seconds = [t["port_optimize_policy_seconds"] for t in theirs]
+    return {"port_rounds": repeats,
+            "ours_optimize_policy_maxiter10_seconds_all": ours,
+            "port_optimize_policy_maxiter10_seconds_all": port_seconds,
+            "ours_optimize_policy_maxiter10_seconds": float(np.median(ours)),
+            "port_optimize_policy_maxiter10_seconds": float(np.median(port_seconds)),
+            "port_ratio": float(np.median(port_seconds) / np.median(ours)),
+            "port_peak_memory_mb": float(np.median([t["port_peak_memory_mb"] for t in theirs]))}
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--problem", choices=["reacher", "cartpole", "all"], default="all")
@@ -171,8 +230,18 @@ def main(argv=None):
     parser.add_argument("--baseline", action="store_true",
                         help="also time the straightforward port in naive_port.py (reacher "
                              "only: it has no angles)")
+    parser.add_argument("--port", default=None,
+                        help="checkout of nrontsis/PILCO: also time its optimize_policy "
+                             "(reacher) side by side, in fresh processes of --port-python")
+    parser.add_argument("--port-python", default=None,
+                        help="python of an environment where the port runs (TF 2, gpflow 2, "
+                             "numpy<2, pandas<2.3)")
+    parser.add_argument("--port-repeats", type=int, default=3,
+                        help="rounds of the side-by-side comparison (medians reported)")
     parser.add_argument("--_fresh", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.port and not args.port_python:
+        parser.error("--port needs --port-python (the port's environment)")
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 
     if args._fresh:
@@ -187,15 +256,17 @@ def main(argv=None):
     results["machine"]["tensorflow"] = tf.__version__
     for problem in problems:
         res = time_objective(problem, args.repeats, args.cartpole_data)
-        out = subprocess.run(
-            [sys.executable, __file__, "--_fresh", problem, "--cartpole-data", str(args.cartpole_data)],
-            capture_output=True, text=True, check=True,
-        )
-        res.update(json.loads(out.stdout.strip().splitlines()[-1]))
+        res.update(_fresh_ours(problem, args.cartpole_data))
         results["problems"][problem] = res
     if args.baseline and "reacher" in results["problems"]:
         results["problems"]["reacher"].update(
             time_baseline("reacher", max(3, args.repeats // 3), args.cartpole_data))
+
+    if args.port:
+        if "reacher" not in results["problems"]:
+            parser.error("--port compares on the reacher problem")
+        results["problems"]["reacher"].update(
+            time_port(args.port, args.port_python, args.port_repeats))
 
     header = f"{'problem':<10} {'trace s':>8} {'obj+grad s':>11} {'obj s':>7} {'opt(10) s':>10} {'peak MB':>8}"
     print(header)
@@ -213,6 +284,13 @@ def main(argv=None):
                   f" ours), 10 L-BFGS-B iterations {r['baseline_optimize_maxiter10_seconds']:.1f} s "
                   f"({r['baseline_optimize_maxiter10_seconds'] / r['optimize_policy_maxiter10_seconds']:.1f}x"
                   f" ours); same objective to {r['baseline_relative_difference']:.1e}")
+    for problem, r in results["problems"].items():
+        if "port_ratio" in r:
+            print(f"\nreference port nrontsis/PILCO ({problem}), optimize_policy(maxiter=10) in "
+                  f"fresh processes, median of {r['port_rounds']} interleaved rounds: port "
+                  f"{r['port_optimize_policy_maxiter10_seconds']:.1f} s, this library "
+                  f"{r['ours_optimize_policy_maxiter10_seconds']:.1f} s: "
+                  f"{r['port_ratio']:.1f}x")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(results, fh, indent=2)

@@ -10,7 +10,7 @@ This is how PILCO is usually transcribed to TensorFlow, kept here only so that
 - the horizon is a ``tf.while_loop`` inside one ``tf.function``, differentiated by
   TensorFlow's automatic differentiation throughout.
 
-It computes the same quantity as :meth:`pilco.models.PILCO._policy_loss` (angle-free
+It computes the same quantity as :meth:`pilco.models.rollout.Rollout.policy_loss` (angle-free
 problems, sine-squashed RBF policy, exponential reward), which the benchmark checks
 before timing it.
 """
@@ -131,11 +131,12 @@ def make_objective(agent):
     """``f() -> loss`` (compiled) computing ``-sum of expected rewards`` the naive way,
     reading the agent's data, hyperparameters, policy and reward."""
     H, step = _problem(agent)
+    m_init, S_init = agent.m_init, agent.S_init
 
     @tf.function
     def loss():
-        m0 = tf.convert_to_tensor(agent._m_init)  # noqa: SLF001 - the agent's start
-        s0 = tf.convert_to_tensor(agent._S_init)  # noqa: SLF001
+        m0 = tf.constant(m_init)  # the agent's start
+        s0 = tf.constant(S_init)
 
         def body(t, m, s, total):
             m, s, r = step(m, s)

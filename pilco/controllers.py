@@ -21,6 +21,7 @@ from gpflow import Parameter
 from gpflow.config import default_float
 
 from . import moments as gp_moments
+from .seeding import generator
 from .validation import (
     as_2d_float,
     check_gaussian,
@@ -142,7 +143,7 @@ class LinearController(_SquashedController):
     def __init__(self, state_dim: int, control_dim: int, max_action=1.0, squash=squash_sin,
                  seed: Optional[int] = None):
         super().__init__(state_dim, control_dim, max_action, squash)
-        rng = np.random.default_rng(seed)
+        rng = generator(seed)
         self.W = Parameter(rng.uniform(-0.1, 0.1, (self.control_dim, self.state_dim)))
         self.b = Parameter(np.zeros((1, self.control_dim)))
 
@@ -154,7 +155,7 @@ class LinearController(_SquashedController):
 
     def randomize(self, scale: float = 0.1, seed: Optional[int] = None):
         """Draw fresh parameters: W, b ~ N(0, scale^2)."""
-        rng = np.random.default_rng(seed)
+        rng = generator(seed)
         self.W.assign(scale * rng.standard_normal(self.W.shape))
         self.b.assign(scale * rng.standard_normal(self.b.shape))
 
@@ -189,7 +190,7 @@ class RbfController(_SquashedController):
                  seed: Optional[int] = None):
         super().__init__(state_dim, control_dim, max_action, squash)
         self.num_basis_functions = check_positive_int(num_basis_functions, "num_basis_functions")
-        rng = np.random.default_rng(seed)
+        rng = generator(seed)
         self.centers = Parameter(rng.standard_normal((self.num_basis_functions, self.state_dim)))
         self.targets = Parameter(
             0.1 * rng.standard_normal((self.num_basis_functions, self.control_dim))
@@ -231,7 +232,7 @@ class RbfController(_SquashedController):
 
     def randomize(self, scale: float = 1.0, seed: Optional[int] = None):
         """Draw fresh centers ~ N(0, scale^2), targets ~ N(0, 0.1^2), lengthscales ~ 1."""
-        rng = np.random.default_rng(seed)
+        rng = generator(seed)
         self.centers.assign(scale * rng.standard_normal(self.centers.shape))
         self.targets.assign(0.1 * rng.standard_normal(self.targets.shape))
         for g in self.models:

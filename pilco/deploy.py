@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import json
 import logging
-import os
+import zipfile
+import zlib
 from typing import Optional, Sequence
 
 import numpy as np
@@ -25,9 +26,11 @@ import numpy as np
 from .features import angle_features
 from .validation import (
     as_2d_float,
+    check_format_version,
     check_indices,
     check_matrix,
     check_option,
+    check_path,
     check_positive_int,
     check_states,
 )
@@ -134,39 +137,58 @@ class Policy:
         return u[0] if single else u
 
 
+#: what NumPy raises for an entry of an .npz it cannot read
+_UNREADABLE = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error)
+
+
 def read_npz(path, kind: str):
-    """Arrays and JSON metadata of a ``.npz`` written by pilco, or a clear ``ValueError``.
+    """Arrays and JSON metadata of a ``.npz`` written by pilco, or a clear ``ValueError``
+    (``TypeError`` for a path that is not a path; ``FileNotFoundError`` when missing).
 
     Returns (arrays without the metadata entry, metadata dict). No pickles are loaded.
     """
-    path = os.fspath(path)
+    path = check_path(path)
+    not_ours = f"{path} is not a {kind} file written by pilco"
     try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except FileNotFoundError:
+        data = np.load(path, allow_pickle=False)
+    except (FileNotFoundError, PermissionError):
         raise
-    except (ValueError, OSError) as err:
-        raise ValueError(f"{path} is not a {kind} file written by pilco: {err}") from None
+    except (EOFError, ValueError, zipfile.BadZipFile) as err:
+        raise ValueError(f"{not_ours}: it is truncated or not an .npz archive ({err})") from None
+    except OSError as err:  # e.g. a directory
+        raise ValueError(f"{not_ours}: {err}") from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise ValueError(f"{not_ours}: it holds a single array (.npy), not an .npz archive")
+    try:
+        with data:
+            arrays = {k: data[k] for k in data.files}
+    except _UNREADABLE as err:  # a damaged entry, or pickled objects
+        raise ValueError(f"{not_ours}: its entries cannot be read ({err})") from None
     if META_KEY not in arrays:
-        raise ValueError(f"{path} is not a {kind} file written by pilco (no {META_KEY!r} entry)")
-    return arrays, json.loads(str(arrays.pop(META_KEY)))
+        raise ValueError(f"{not_ours} (no {META_KEY!r} entry)")
+    try:
+        meta = json.loads(str(arrays.pop(META_KEY)))
+    except ValueError:
+        meta = None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{not_ours}: its {META_KEY!r} entry is not a JSON object")
+    return arrays, meta
 
 
 def load_policy(path) -> Policy:
     """Read a policy file written by ``export_policy``; returns a callable :class:`Policy`.
 
     ``policy(state)`` maps a state [D] to an action [U] (or a batch [N, D] to [N, U]).
+    A file that is not such a policy file (truncated, another kind of file, a format
+    version this reader does not know) raises a ``ValueError`` saying so.
     """
-    path = os.fspath(path)
+    path = check_path(path)
     arrays, meta = read_npz(path, "PILCO policy")
     if meta.get("format") != POLICY_FORMAT:
         raise ValueError(f"{path} holds format {meta.get('format')!r}, expected "
                          f"{POLICY_FORMAT!r} (agent files are read with "
                          f"pilco.persistence.load_agent)")
-    version = meta.get("version")
-    if not isinstance(version, int) or version > POLICY_VERSION:
-        raise ValueError(f"{path} has policy format version {version!r}; this reader supports "
-                         f"versions up to {POLICY_VERSION}")
+    check_format_version(meta, path, "policy", POLICY_VERSION, "this reader")
 
     def get(key: str, default: Optional[np.ndarray] = None):
         if key in arrays:

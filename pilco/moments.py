@@ -147,9 +147,12 @@ def symmetric_pairs(E: int):
     """Index arrays of the upper-triangular pairs of an E x E symmetric matrix.
 
     Returns (I [P], J [P], index [E, E]) with P = E(E+1)/2, where ``index[a, b]`` is the
-    position of pair (min(a, b), max(a, b)); ``I == J`` marks the diagonal pairs.
+    position of pair (min(a, b), max(a, b)); ``I == J`` marks the diagonal pairs, which
+    come first (pair p < E is (p, p)), followed by the pairs i < j in row order.
     """
-    I, J = np.triu_indices(E)
+    I, J = np.triu_indices(E, k=1)
+    I = np.concatenate([np.arange(E), I])
+    J = np.concatenate([np.arange(E), J])
     index = np.zeros((E, E), dtype=np.int32)
     index[I, J] = np.arange(len(I))
     index[J, I] = np.arange(len(I))
@@ -191,22 +194,29 @@ def _pair_exponent_factors(T, iiI, iiJ, kI, kJ):
     return aI, aJ, leftT, rightT
 
 
-def _pair_second_moments(T, mI, mJ, kI, kJ, XI, XJ, W):
+def _pair_second_moments(T, mI, mJ, kI, kJ, XI, XJ, bI, bJ, iK):
     """``sum_ab W[p]_ab exp(exponent[p]_ab)`` per output pair p, with a hand-made gradient.
 
     The exponent of pair p = (i, j) is ``u_a + v_b + iiI_a^T T iiJ_b`` where
     ``iiI = XI - mI`` (centers minus the input mean, over ``l_i^2``), ``iiJ = XJ - mJ``,
     ``u = kI + iiI^T T iiI / 2`` and ``v = kJ + iiJ^T T iiJ / 2`` (see
-    :func:`_pair_exponent_factors`). ``XI``, ``XJ`` and ``W`` are constants (the dynamics
-    GP's centers and pair weights): no gradient flows to them.
+    :func:`_pair_exponent_factors`); the weights are ``W[p] = bI bJ^T - [i == j] iK_i``
+    (:func:`pair_weights`), the diagonal pairs first (:func:`symmetric_pairs`). ``XI``,
+    ``XJ``, ``bI``, ``bJ`` and ``iK`` are constants (the dynamics GP's centers, ``beta``
+    and ``K^-1``): no gradient flows to them.
 
-    Differentiating through the n x n product would cost two [D+2, n] x [n, n] products
-    per pair. Because the centers are constant, the mean shifts ``mI``, ``mJ`` only need
-    the row and column sums ``r``, ``c`` of ``G = g W * Q``, and ``T`` needs
-    ``iiI G iiJ^T``: one [n, n] x [n, D] product per pair, a third less work in all.
+    The weights are never formed: with ``Q = exp(exponent)`` the rank-one part is
+    ``bI^T Q bJ``, and the gradient only needs ``G = g W * Q`` through its row and column
+    sums ``r``, ``c`` (for the mean shifts and ``kI``, ``kJ``) and ``G iiJ^T`` (for
+    ``T``). For the rank-one part these are ``bI * (Q bJ)``, ``bJ * (Q^T bI)`` and
+    ``bI * Q (bJ * iiJ)^T``: one [n, n] x [n, D + 1] product and one [n, n] x [n]
+    product per pair, computed with the value, so no n x n tensor is kept for the
+    backward pass and no n x n elementwise product or reduction is needed for the
+    E(E-1)/2 off-diagonal pairs. The E diagonal pairs add ``iK_i * Q`` and one more
+    [n, n] x [n, D + 1] product.
 
     Shapes: T [P, D, D] (symmetric), mI/mJ [P, D], kI/kJ [P, n], XI/XJ [P, D, n],
-    W [P, n, n] -> [P].
+    bI/bJ [P, n], iK [E, n, n] or None -> [P].
     """
 
     @tf.custom_gradient
@@ -214,20 +224,35 @@ def _pair_second_moments(T, mI, mJ, kI, kJ, XI, XJ, W):
         iiI = XI - mI[:, :, None]
         iiJ = XJ - mJ[:, :, None]
         aI, aJ, leftT, rightT = _pair_exponent_factors(T, iiI, iiJ, kI, kJ)
-        WQ = W * tf.exp(tf.matmul(leftT, rightT, transpose_a=True))
+        Q = tf.exp(tf.matmul(leftT, rightT, transpose_a=True))  # [P, n, n]
+        # [Q bJ, Q (bJ * iiJ)^T]: [P, n, D + 1]
+        QB = tf.matmul(Q, tf.concat([bJ[:, None, :], bJ[:, None, :] * iiJ], axis=1),
+                       transpose_b=True)
+        Qb = bI * QB[:, :, 0]  # row sums of the rank-one part, [P, n]
+        bQ = bJ * tf.linalg.matvec(Q, bI, adjoint_a=True)  # its column sums, [P, n]
+        GJ = bI[:, :, None] * QB[:, :, 1:]  # [P, n, D]
+        if iK is not None:
+            E = iK.shape[0]
+            Ones_iiJ = tf.concat([tf.ones_like(bJ[:E, None, :]), iiJ[:E]], axis=1)
+            KQ = tf.matmul(iK * Q[:E], Ones_iiJ, transpose_b=True)  # [E, n, D + 1]
+            pad = [[0, bI.shape[0] - E], [0, 0]]
+            # iK_i * Q is symmetric for a diagonal pair: its row and column sums agree
+            d = tf.pad(KQ[:, :, 0], pad)
+            Qb -= d
+            bQ -= d
+            GJ -= tf.pad(KQ[:, :, 1:], pad + [[0, 0]])
+        value = tf.reduce_sum(Qb, axis=1)
 
         def grad(g):
-            G = g[:, None, None] * WQ
-            r = tf.reduce_sum(G, axis=2)  # [P, n], d/du
-            c = tf.reduce_sum(G, axis=1)  # [P, n], d/dv
-            GJ = tf.matmul(G, iiJ, transpose_b=True)  # [P, n, D]
-            dT = (tf.matmul(iiI, GJ)
+            r = g[:, None] * Qb  # [P, n], d/du
+            c = g[:, None] * bQ  # [P, n], d/dv
+            dT = (tf.matmul(iiI, g[:, None, None] * GJ)
                   + 0.5 * tf.matmul(iiI * r[:, None, :], iiI, transpose_b=True)
                   + 0.5 * tf.matmul(iiJ * c[:, None, :], iiJ, transpose_b=True))
             dm = -(tf.linalg.matvec(aI, r) + tf.linalg.matvec(aJ, c))
             return dT, dm, dm, r, c
 
-        return tf.reduce_sum(WQ, axis=[1, 2]), grad
+        return value, grad
 
     return block(T, mI, mJ, kI, kJ)
 
@@ -285,20 +310,27 @@ class Predictor(NamedTuple):
     first_beta: tf.Tensor
     #: [P, n] ``beta`` of each pair's second output
     second_beta: tf.Tensor
-    #: [P, n, n] pair weights (:func:`pair_weights`), or None for a deterministic GP
+    #: [P, n, n] pair weights (:func:`pair_weights`), or None for a deterministic GP or
+    #: a constant one
     pair_weights: Optional[tf.Tensor]
-    #: Python bool: the pair weights were given, so no gradient flows to them
+    #: [E, n, n] ``K^-1`` of a constant GP (see :func:`prepare`), else None
+    constant_inverse: Optional[tf.Tensor]
+    #: Python bool: the GP's centers, ``beta`` and ``K^-1`` are constants (no gradient
+    #: flows to them), so the pair block with the hand-made gradient is used
     weights_constant: bool
     #: Python bool: the GP carries no model uncertainty (the RBF policy)
     deterministic: bool
 
 
-def prepare(factorization: Factorization, W: Optional[tf.Tensor] = None,
+def prepare(factorization: Factorization, constant: bool = False,
             deterministic: Optional[bool] = None) -> Predictor:
     """Input-independent pieces of :func:`predict` for a factorised GP.
 
-    ``W`` [P, n, n] (from :func:`pair_weights`) is treated as a constant; when omitted the
-    weights are formed from ``beta`` and ``iK`` with gradients flowing through them.
+    With ``constant`` the factorisation's centers, ``beta`` and ``K^-1`` are treated as
+    constants (no gradient flows to them; the dynamics GP during policy optimisation) and
+    the output covariance uses the fused block of :func:`_pair_second_moments`;
+    otherwise the pair weights are formed from ``beta`` and ``iK`` with gradients
+    flowing through them.
     """
     centers, beta, iK, ell, sf2 = factorization
     E = beta.shape[0]
@@ -311,8 +343,9 @@ def prepare(factorization: Factorization, W: Optional[tf.Tensor] = None,
     iL2I = tf.gather(iL2, I)
     iL2J = tf.gather(iL2, J)
     sqP = tf.sqrt(iL2I + iL2J)
-    weights_constant = W is not None
-    if W is None and not deterministic:
+    constant = bool(constant)
+    W = None
+    if not constant and not deterministic:
         W = pair_weights(beta, iK)
     return Predictor(
         scaled_centers=XT * iL[:, :, None], inv_lengthscales=iL,
@@ -322,7 +355,8 @@ def prepare(factorization: Factorization, W: Optional[tf.Tensor] = None,
         second_inv_sq_lengthscales=iL2J, pair_scale_outer=sqP[:, :, None] * sqP[:, None, :],
         pair_inv_scale_outer=1.0 / (sqP[:, :, None] * sqP[:, None, :]),
         first_beta=tf.gather(beta, I), second_beta=tf.gather(beta, J),
-        pair_weights=W, weights_constant=weights_constant, deterministic=bool(deterministic),
+        pair_weights=W, constant_inverse=None if deterministic else iK,
+        weights_constant=constant, deterministic=bool(deterministic),
     )
 
 
@@ -366,7 +400,8 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
     if pred.weights_constant:
         # centers and weights constant: the fused block with its cheaper gradient
         raw = _pair_second_moments(T, m_first, m_second, log_k_first, log_k_second,
-                                   pred.first_centers, pred.second_centers, pred.pair_weights)
+                                   pred.first_centers, pred.second_centers, pred.first_beta,
+                                   pred.second_beta, pred.constant_inverse)
     else:
         iiI = pred.first_centers - m_first[:, :, None]  # (centers - m) / l_i^2, [P, D, n]
         iiJ = pred.second_centers - m_second[:, :, None]
@@ -389,20 +424,19 @@ def moment_match(
     m: tf.Tensor,
     s: tf.Tensor,
     fact: Factorization,
-    W: Optional[tf.Tensor] = None,
+    constant: bool = False,
     deterministic: Optional[bool] = None,
     deterministic_jitter: float = 1e-6,
 ):
     """Mean, covariance and input-output covariance of E GPs at x ~ N(m, s).
 
-    Shapes: m [1, D], s [D, D], ``fact`` from :func:`factorize` (or :func:`fitc_factorize`),
-    optional ``W`` [P, n, n] from :func:`pair_weights`, precomputed by the caller and then
-    treated as a constant (no gradient flows to it; computed here when omitted)
-    -> M [1, E], S [E, E], V [D, E] with ``V = inv(s) Cov[x, f(x)]``.
+    Shapes: m [1, D], s [D, D], ``fact`` from :func:`factorize` (or :func:`fitc_factorize`)
+    -> M [1, E], S [E, E], V [D, E] with ``V = inv(s) Cov[x, f(x)]``. With ``constant``
+    no gradient flows to the factorisation (see :func:`prepare`).
 
     For a deterministic GP (``deterministic``, by default ``fact.iK is None``) the
     covariance holds no model uncertainty and ``deterministic_jitter`` is added to its
     diagonal; otherwise the latent variance ``sf^2 - tr(K^-1 Q)`` is included
     (observation noise is not).
     """
-    return predict(m, s, prepare(fact, W, deterministic), deterministic_jitter)
+    return predict(m, s, prepare(fact, constant, deterministic), deterministic_jitter)

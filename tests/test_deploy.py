@@ -154,6 +154,50 @@ def test_bad_files_are_rejected(tmp_path):
         load_policy(tmp_path / "missing.npz")
 
 
+def _rewrite_meta(src, dst, **changes):
+    """Copy the .npz ``src`` to ``dst`` with metadata fields changed (None: removed)."""
+    with np.load(src) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["__meta__"]))
+    meta.update(changes)
+    meta = {k: v for k, v in meta.items() if v is not None}
+    arrays["__meta__"] = np.array(json.dumps(meta))
+    np.savez(dst, **arrays)
+    return dst
+
+
+def test_truncated_foreign_and_other_version_files_are_rejected(tmp_path):
+    good = make_agent("rbf", squash_sin).export_policy(tmp_path / "policy.npz")
+    content = Path(good).read_bytes()
+    not_ours = "is not a PILCO policy file written by pilco"
+    for size in (len(content) - 1, len(content) // 2, 10, 0):  # cut anywhere: never loaded
+        (tmp_path / "cut.npz").write_bytes(content[:size])
+        with pytest.raises(ValueError, match=not_ours + ": it is truncated or not an .npz"):
+            load_policy(tmp_path / "cut.npz")
+    (tmp_path / "text.npz").write_text("0.1 0.2 0.3\n")
+    with pytest.raises(ValueError, match=not_ours + ": it is truncated or not an .npz"):
+        load_policy(tmp_path / "text.npz")
+    np.save(tmp_path / "array.npy", np.ones(3))
+    with pytest.raises(ValueError, match=r"holds a single array \(.npy\), not an .npz"):
+        load_policy(tmp_path / "array.npy")
+    np.savez(tmp_path / "meta.npz", __meta__=np.array("{not json"), beta=np.ones(2))
+    with pytest.raises(ValueError, match="'__meta__' entry is not a JSON object"):
+        load_policy(tmp_path / "meta.npz")
+    np.savez(tmp_path / "pickled.npz", __meta__=np.array([{"format": "pilco-policy"}]))
+    with pytest.raises(ValueError, match=not_ours + ": its entries cannot be read"):
+        load_policy(tmp_path / "pickled.npz")
+    for version in (0, 2, "1", None, True):
+        with pytest.raises(ValueError, match=f"policy format version {version!r}.*this "
+                                             "reader reads policy format version 1"):
+            load_policy(_rewrite_meta(good, tmp_path / "v.npz", version=version))
+    # a file from another pilco release in the same format is read
+    other = load_policy(_rewrite_meta(good, tmp_path / "old.npz", pilco_version="0.0.1"))
+    np.testing.assert_array_equal(other(np.ones(3)), load_policy(good)(np.ones(3)))
+    for path in (None, 3, b"policy.npz"):
+        with pytest.raises(TypeError, match="path must be a file path"):
+            load_policy(path)
+
+
 def test_inconsistent_policy_arrays_are_rejected():
     common = dict(kind="rbf", squash="sin", state_dim=2, angle_indices=[], max_action=1.0)
     with pytest.raises(ValueError, match=r"centers must have shape \(3, 2\)"):

@@ -1,4 +1,5 @@
-"""Behavioural tests of the PILCO environments (cart-pole swing-up, Fetch joint reacher)."""
+"""Behavioural tests of the PILCO environments (cart-pole swing-up, Fetch joint reacher,
+pendulum swing-up)."""
 from __future__ import annotations
 
 import importlib
@@ -25,7 +26,7 @@ def test_import_does_not_load_mujoco_and_registers_ids():
         "assert 'mujoco' not in sys.modules, 'mujoco imported'\n"
         "assert 'gymnasium_robotics' not in sys.modules, 'gymnasium_robotics imported'\n"
         "for i in ('pilco/CartPoleSwingUp-v0', 'pilco/FetchJointReacher-v0',"
-        " 'pilco/FetchJointReacherDamaged-v0'):\n"
+        " 'pilco/FetchJointReacherDamaged-v0', 'pilco/PendulumSwingUp-v0'):\n"
         "    assert i in gymnasium.registry, i\n"
         "env = gymnasium.make('pilco/CartPoleSwingUp-v0')\n"
         "env.reset(seed=0); env.step([0.0])\n"
@@ -481,3 +482,64 @@ def test_fetch_render(fetch_cls, tmp_path):
     red = (img[..., 0] > 150) & (img[..., 1] < 60) & (img[..., 2] < 60)
     assert red.sum() > 5  # the red target marker is visible
     assert np.any(img2 != img)  # the arm moved
+
+
+# ---------------------------------------------------------------------------
+# Pendulum swing-up (gymnasium's Pendulum-v1, the reference port's workload)
+# ---------------------------------------------------------------------------
+
+
+def test_pendulum_starts_hanging_down_and_holds_each_action_for_three_steps():
+    env = penvs.PendulumSwingUp()
+    obs, info = env.reset(seed=3)
+    assert obs.shape == (3,) and obs.dtype == np.float32
+    assert obs[0] < -0.99 and abs(obs[2]) < 0.3  # cos θ ≈ -1: hanging, nearly at rest
+    assert info["distance"] == pytest.approx(abs(info["theta"])) and info["distance"] > 2.9
+    np.testing.assert_array_equal(env.reset(seed=3)[0], obs)  # seeded start
+
+    reference = gymnasium.make("Pendulum-v1").unwrapped  # the same physics, step by step
+    reference.reset(seed=0)
+    reference.state = env.pendulum.state.copy()
+    total = 0.0
+    for _ in range(3):
+        expected, r, *_ = reference.step(np.array([1.5], dtype=np.float32))
+        total += r
+    obs, reward, terminated, truncated, info = env.step([1.5])
+    np.testing.assert_allclose(obs, expected, rtol=1e-6)
+    assert reward == pytest.approx(total) and not terminated and not truncated
+    theta = np.arctan2(obs[1], obs[0])
+    assert info["theta"] == pytest.approx(theta, abs=1e-5)
+
+
+@pytest.mark.filterwarnings("ignore:.*symmetric and normalized.*:UserWarning")
+def test_pendulum_registered_make_checker_and_render():
+    env = gymnasium.make(penvs.PENDULUM_ID)
+    assert env.spec.max_episode_steps == 40
+    env.reset(seed=1)
+    truncs = [env.step(env.action_space.sample())[3] for _ in range(40)]
+    assert truncs[-1] and not any(truncs[:-1])
+    check_env(penvs.PendulumSwingUp(), skip_render_check=True)
+    drawn = penvs.PendulumSwingUp(render_mode="rgb_array")
+    drawn.reset(seed=0)
+    img = drawn.render()
+    assert img.shape == (300, 300, 3) and img.dtype == np.uint8
+    drawn.pendulum.state = np.array([0.0, 0.0])  # upright
+    assert np.any(drawn.render() != img)
+    assert penvs.PendulumSwingUp().render() is None
+
+
+def test_pendulum_bad_input():
+    env = penvs.PendulumSwingUp()
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step([0.0])
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="torque"):
+        env.step([1.0, 2.0])
+    with pytest.raises(ValueError, match="torque"):
+        env.step([np.nan])
+    with pytest.raises(ValueError, match="Unknown reset options"):
+        env.reset(options={"state": [0.0, 0.0]})
+    with pytest.raises(ValueError, match="substeps"):
+        penvs.PendulumSwingUp(substeps=0)
+    with pytest.raises(ValueError, match="start_std"):
+        penvs.PendulumSwingUp(start_std=-1.0)

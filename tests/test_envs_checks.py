@@ -24,6 +24,9 @@ CARTPOLE_BAD = [
     ({"start_mean": [0.0, 0.0]}, ValueError, "start_mean"),
     ({"start_mean": [0.0, NAN, 0.0, 0.0]}, ValueError, "start_mean"),
     ({"start_mean": ["a", "b", "c", "d"]}, TypeError, "start_mean"),
+    ({"start_mean": ["0", "0", "0", "0"]}, TypeError, "start_mean must be .*, got strings"),
+    ({"start_mean": [True, False, False, False]}, TypeError, "start_mean .* got booleans"),
+    ({"start_std": "0.1"}, TypeError, "start_std must be .*, got strings"),
     ({"start_std": [0.1, 0.1]}, ValueError, "start_std"),
     ({"start_std": -0.1}, ValueError, "start_std"),
     ({"start_std": NAN}, ValueError, "start_std"),
@@ -48,13 +51,24 @@ RESET_BAD = [
     ({"seed": 1.5}, TypeError, "seed"),
     ({"seed": "0"}, TypeError, "seed"),
     ({"options": [("state", [0, 0, 0, 0])]}, TypeError, "options"),
+    ({"options": "state"}, TypeError, "options must be a dict or None, got str"),
+    ({"options": {1: 0.0}}, ValueError, r"Unknown reset options \[1\]"),
 ]
 
 CARTPOLE_RESET_BAD = RESET_BAD + [
     ({"options": {"state": [0.0, 0.0, 0.0]}}, ValueError, r"options\['state'\]"),
+    ({"options": {"state": [[0.0, 0.0, 0.0, 0.0]]}}, ValueError,
+     r"options\['state'\] must have shape \(4,\)"),
     ({"options": {"state": [0.0, NAN, 0.0, 0.0]}}, ValueError, "finite"),
     ({"options": {"state": [0, 0, 0, 0], "qpos": 1}}, ValueError,
      r"Unknown reset options \['qpos'\]"),
+    ({"options": {"State": [0, 0, 0, 0]}}, ValueError, r"Unknown reset options \['State'\]"),
+    ({"options": {"state": None}}, TypeError, r"options\['state'\] .* got NoneType"),
+    ({"options": {"state": ["0", "0", "0", "0"]}}, TypeError, r"options\['state'\] .* strings"),
+    ({"options": {"state": [True, False, True, False]}}, TypeError,
+     r"options\['state'\] .* booleans"),
+    ({"options": {"state": {"x": 0.0}}}, TypeError, r"options\['state'\] .* got dict"),
+    ({"options": {"state": [1j, 0, 0, 0]}}, TypeError, r"options\['state'\] .* complex"),
 ]
 
 
@@ -62,6 +76,45 @@ CARTPOLE_RESET_BAD = RESET_BAD + [
 def test_cartpole_reset_refuses(kwargs, exc, match):
     with pytest.raises(exc, match=match):
         CartPoleSwingUp().reset(**kwargs)
+
+
+def test_a_refused_cartpole_reset_changes_nothing():
+    """A reset refused for a bad option neither reseeds the env nor moves it."""
+    a, b = CartPoleSwingUp(), CartPoleSwingUp()
+    a.reset(seed=3)
+    b.reset(seed=3)
+    with pytest.raises(ValueError, match="Unknown reset options"):
+        b.reset(seed=9, options={"nope": 1})
+    with pytest.raises(ValueError, match="options"):
+        b.reset(seed=9, options={"state": [0.0, 0.0, 0.0]})
+    np.testing.assert_array_equal(b.state, a.state)
+    np.testing.assert_array_equal(b.reset()[0], a.reset()[0])  # the same random stream
+
+
+def test_the_pendulum_has_no_reset_options_and_a_refused_reset_changes_nothing():
+    from pilco.envs import PendulumSwingUp
+
+    a, b = PendulumSwingUp(), PendulumSwingUp()
+    a.reset(seed=3)
+    b.reset(seed=3)
+    for kwargs, exc, match in RESET_BAD + [({"options": {"state": [0.0, 0.0]}}, ValueError,
+                                            r"Unknown reset options \['state'\]")]:
+        with pytest.raises(exc, match=match):
+            b.reset(**{"seed": 9, **kwargs})
+    np.testing.assert_array_equal(b.pendulum.state, a.pendulum.state)
+    np.testing.assert_array_equal(b.reset()[0], a.reset()[0])
+    np.testing.assert_array_equal(b.reset(options={})[0], a.reset(options=None)[0])
+
+
+def test_cartpole_reset_options_that_work():
+    env = CartPoleSwingUp(noise_std=0.0)
+    for options in (None, {}):
+        obs, info = env.reset(seed=0, options=options)
+        assert obs.shape == (4,) and np.all(np.isfinite(obs))
+    for state in ([0, 0, 0, 1], np.array([0.0, 0.0, 0.0, 1.0], dtype=np.float32),
+                  (0.0, 0.0, 0.0, np.float64(1.0))):
+        _, info = env.reset(options={"state": state})
+        np.testing.assert_array_equal(info["state"], [0.0, 0.0, 0.0, 1.0])
 
 
 def test_cartpole_accepts_numpy_seed_like_int():
@@ -136,6 +189,9 @@ FETCH_RESET_BAD = RESET_BAD + [
     ({"options": {"target": [1.0, 2.0]}}, ValueError, r"options\['target'\]"),
     ({"options": {"target": [1.0, NAN, 0.4]}}, ValueError, "finite"),
     ({"options": {"state": np.zeros(10)}}, ValueError, r"Unknown reset options \['state'\]"),
+    ({"options": {"qpos": ["0"] * 7}}, TypeError, r"options\['qpos'\] .* strings"),
+    ({"options": {"target": [True, False, True]}}, TypeError, r"options\['target'\] .* booleans"),
+    ({"options": {"target": None}}, TypeError, r"options\['target'\] .* NoneType"),
 ]
 
 
@@ -144,6 +200,17 @@ def test_fetch_reset_refuses(fetch_cls, kwargs, exc, match):
     env = fetch_cls()
     with pytest.raises(exc, match=match):
         env.reset(**kwargs)
+
+
+def test_a_refused_fetch_reset_changes_nothing(fetch_cls):
+    """A valid new target beside an invalid qpos is not applied; the seed is not used."""
+    a, b = fetch_cls(), fetch_cls()
+    a.reset(seed=3)
+    b.reset(seed=3)
+    with pytest.raises(ValueError, match=r"options\['qpos'\]"):
+        b.reset(seed=9, options={"target": [1.0, 0.5, 0.5], "qpos": np.zeros(3)})
+    np.testing.assert_array_equal(b.target, a.target)
+    np.testing.assert_array_equal(b.reset()[0], a.reset()[0])
 
 
 def test_fetch_setters_and_damage_refuse(fetch_cls):

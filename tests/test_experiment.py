@@ -222,7 +222,7 @@ def test_tasks_entry_point_lists_the_tasks():
     out = subprocess.run([sys.executable, "-m", "pilco.tasks", "nonsense"],
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2
-    assert "cartpole,reacher,damaged_reacher,adaptation" in out.stderr
+    assert "cartpole,reacher,damaged_reacher,adaptation,pendulum" in out.stderr
     from pilco.tasks import task_main
 
     with pytest.raises(ValueError, match="unknown task 'nonsense'"):
@@ -288,3 +288,24 @@ def test_the_reacher_paper_code_preset():
     assert kw["joint_state"] == "commanded" and kw["damage_mode"] == "zero_on_step"
     healthy = reacher.parse_args([])
     assert healthy.preset is None and reacher.env_kwargs(healthy, False)["joint_state"] == "measured"
+
+
+def test_success_when_the_last_episode_holds_the_target():
+    """``solved_in_last_episode``: the pendulum's success, the hold rule on the last
+    episode (a learned one) whatever happened before."""
+    from pilco.experiment.scoring import solved_in_last_episode
+
+    cfg = ExperimentConfig(task="t", env_id="x", episodes=3, solved_rule="hold", hold_steps=3,
+                           success_threshold=0.3)
+    success = solved_in_last_episode(cfg)
+    held, dropped = [3.0, 1.0, 0.2, 0.1, 0.2], [3.0, 0.1, 0.1, 0.1, 0.5]
+
+    def summary(*episodes):
+        return {"episodes": [{"random": r} for r, _ in episodes],
+                "distances": [d for _, d in episodes]}
+
+    assert success(summary((True, dropped), (False, held)))
+    assert not success(summary((False, held), (False, dropped)))  # up once, not at the end
+    assert not success(summary((True, held)))  # a random episode does not count
+    assert not success(summary((False, [3.0, 0.1, 0.1])))  # fewer steps than hold_steps
+    assert not success(summary())

@@ -242,9 +242,44 @@ def test_load_rejects_other_files(tmp_path):
     np.savez(tmp_path / "newer.npz", **arrays)
     with pytest.raises(ValueError, match="version 99"):
         PILCO.load(tmp_path / "newer.npz")
+    # no pilco wrote format versions other than 1: older, odd or missing ones are refused
+    for version in (0, -1, "1", 1.0, True):
+        meta["version"] = version
+        arrays["__meta__"] = np.array(json.dumps(meta))
+        np.savez(tmp_path / "other.npz", **arrays)
+        with pytest.raises(ValueError, match=f"agent format version {version!r} .*written by "
+                                             r"pilco .*reads agent format version 1$"):
+            PILCO.load(tmp_path / "other.npz")
+    # another pilco release writing the same format version: read as ours
+    meta.update(version=1, pilco_version="0.0.1")
+    arrays["__meta__"] = np.array(json.dumps(meta))
+    np.savez(tmp_path / "release.npz", **arrays)
+    np.testing.assert_array_equal(PILCO.load(tmp_path / "release.npz").data[0], agent.data[0])
+    no_gp = {k: v for k, v in meta.items() if k != "gp"}
+    np.savez(tmp_path / "no-gp.npz", **dict(arrays, __meta__=np.array(json.dumps(no_gp))))
+    with pytest.raises(ValueError, match="is incomplete: its metadata lack 'gp'"):
+        PILCO.load(tmp_path / "no-gp.npz")
     del arrays["gp/lengthscales"], arrays["gp/lengthscales_raw"]
     meta["version"] = 1
     arrays["__meta__"] = np.array(json.dumps(meta))
     np.savez(tmp_path / "broken.npz", **arrays)
     with pytest.raises(ValueError, match="'gp/lengthscales' is missing"):
         PILCO.load(tmp_path / "broken.npz")
+
+
+def test_load_rejects_truncated_files_and_save_needs_a_path(tmp_path):
+    agent = rbf_agent()
+    content = Path(agent.save(tmp_path / "agent.npz")).read_bytes()
+    for size in (len(content) - 1, len(content) // 2, 0):
+        (tmp_path / "cut.npz").write_bytes(content[:size])
+        with pytest.raises(ValueError, match="not a pilco-agent file written by pilco: it is "
+                                             "truncated or not an .npz archive"):
+            PILCO.load(tmp_path / "cut.npz")
+    for path in (None, 7):
+        with pytest.raises(TypeError, match="path must be a file path"):
+            agent.save(path)
+        with pytest.raises(TypeError, match="path must be a file path"):
+            agent.export_policy(path)
+        with pytest.raises(TypeError, match="path must be a file path"):
+            PILCO.load(path)
+    assert sorted(os.listdir(tmp_path)) == ["agent.npz", "cut.npz"]  # nothing written

@@ -205,6 +205,23 @@ def test_plan_builds_run_directories(tmp_path):
     assert described[1] == {"label": "horizon=5", "flags": ["--horizon", "5", "--episodes", "2"]}
 
 
+def test_pendulum_is_a_sweep_task(tmp_path):
+    """The task list, the help and the flag checks know the pendulum task."""
+    assert cli.task_names() == ("cartpole", "reacher", "damaged_reacher", "adaptation",
+                                "pendulum")
+    assert cli.task_names() == cli.DEFAULT_TASKS
+    assert "pendulum" in cli.build_parser().format_help()
+    args = cli.build_parser().parse_args(["pendulum", "--seeds", "0-1", "--output",
+                                          str(tmp_path), "--set", "threshold=0.2"])
+    specs, _ = cli.plan(args, ["--episodes", "5"])
+    assert specs[1].command()[2:] == ["pilco.tasks", "pendulum", "--seed", "1", "--output",
+                                      specs[1].directory, "--quiet", "--no-render",
+                                      "--no-figures", "--threshold", "0.2", "--episodes", "5"]
+    with pytest.raises(ValueError, match="no flag --max-force"):  # a cart-pole flag
+        cli.plan(cli.build_parser().parse_args(
+            ["pendulum", "--output", str(tmp_path), "--set", "max_force=3"]), [])
+
+
 @pytest.mark.parametrize("argv, message", [
     (["nope"], "unknown task"),
     (["cartpole", "--seeds", "5-2"], "backwards"),

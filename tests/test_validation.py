@@ -299,6 +299,12 @@ METHODS = [
      "horizon must be a positive integer, got 0"),
     ("predict-horizon-string", "agent", lambda a: a.predict(horizon="5"), TypeError,
      "horizon must be a positive integer"),
+    ("predict-horizon-negative", "agent", lambda a: a.predict(M0, S0, -3), ValueError,
+     "horizon must be a positive integer, got -3"),
+    ("predict-horizon-fraction", "agent", lambda a: a.predict(M0, S0, 2.5), TypeError,
+     "horizon must be a positive integer, got 2.5"),
+    ("predict-horizon-list", "agent", lambda a: a.predict(M0, S0, [3]), TypeError,
+     r"horizon must be a positive integer, got \[3\]"),
     ("predict_trajectory-not-symmetric", "agent",
      lambda a: a.predict_trajectory(M0, NOT_SYMMETRIC), ValueError,
      "initial state covariance is not symmetric"),
@@ -394,6 +400,40 @@ def test_invalid_calls_leave_the_agent_unchanged(agent):
     agent.horizon = 3.0
     assert agent.horizon == 3
     assert agent.compute_action(np.zeros(D)).shape == (1, U)
+
+
+def test_predict_horizon_none_whole_floats_and_numpy_integers_work(agent):
+    """``predict(m, S, horizon)`` as in the paper's scripts: None is the agent's horizon,
+    2.0 and np.int64(2) are 2, and a longer horizon gives another prediction."""
+    agent.horizon = 3
+    outputs = {h: [np.asarray(v) for v in agent.predict(M0, S0, h)]
+               for h in (None, 3, 2, 2.0, np.int64(2))}
+    for a, b in ((None, 3), (2.0, 2), (np.int64(2), 2)):
+        for va, vb in zip(outputs[a], outputs[b]):
+            np.testing.assert_array_equal(va, vb)
+    assert not np.array_equal(outputs[3][0], outputs[2][0])
+    assert all(np.all(np.isfinite(v)) for v in outputs[3])
+
+
+# -- degenerate data work -------------------------------------------------------------------
+@pytest.mark.parametrize("sparse", [False, True], ids=["full", "sparse"])
+def test_degenerate_data_train_and_predict(sparse):
+    """A transition recorded twice, one recorded N times (sparse: every inducing input the
+    same) and a state dimension that never changes: training and prediction give finite
+    values (the noise floor keeps the kernel matrices invertible), and the GP learns the
+    constant dimension."""
+    Xd = np.vstack([X, X[:1]] if not sparse else [X[:4], np.tile(X[:1], (N, 1))])
+    Yd = np.vstack([Y, Y[:1]] if not sparse else [Y[:4], np.tile(Y[:1], (N, 1))])
+    Yd[:, 1] = 0.0  # zero variance
+    agent = make_agent(data=(Xd, Yd), num_induced_points=4 if sparse else None)
+    losses = agent.optimize_models(maxiter=20)
+    m, s, total = (np.asarray(v) for v in agent.predict(M0, S0, 3))
+    mean, var = agent.one_step_prediction(Xd[:3])
+    for v in (losses, m, s, total, mean, var):
+        assert np.all(np.isfinite(v))
+    assert np.all(np.linalg.eigvalsh(s) > -1e-9) and np.all(var > 0)
+    np.testing.assert_allclose(mean[:, 1], 0.0, atol=1e-3)  # the constant dimension
+    assert abs(mean[0, 0] - Yd[0, 0]) < 0.02  # the repeated transition
 
 
 # -- numerical failures are recovered -------------------------------------------------------

@@ -6,6 +6,8 @@ Importing this package registers (once; importing again is harmless):
 - ``pilco/FetchJointReacher-v0``: :class:`FetchJointReacher`, healthy arm, 50 steps.
 - ``pilco/FetchJointReacherDamaged-v0``: the same with the elbow forced to 0 rad
   (``damaged_joints=("elbow_flex",)``, ``damage_mode="zero"``).
+- ``pilco/PendulumSwingUp-v0``: :class:`PendulumSwingUp`, gymnasium's Pendulum-v1 from
+  hanging down with each action held for 3 of its steps, 40 steps.
 
 Constructor arguments pass through ``gymnasium.make``; e.g. the arm of the paper's
 published scripts (commanded joint angles in the state, elbow healthy at reset and
@@ -28,6 +30,7 @@ import gymnasium
 
 from pilco.envs.cartpole import CartPoleSwingUp
 from pilco.envs.fetch_reacher import ARM_JOINTS, FetchJointReacher
+from pilco.envs.pendulum import PendulumSwingUp
 
 logger = logging.getLogger(__name__)
 
@@ -38,12 +41,15 @@ __all__ = [
     "FETCH_DAMAGED_ID",
     "FETCH_ID",
     "FetchJointReacher",
+    "PENDULUM_ID",
+    "PendulumSwingUp",
     "register_envs",
 ]
 
 CARTPOLE_ID = "pilco/CartPoleSwingUp-v0"
 FETCH_ID = "pilco/FetchJointReacher-v0"
 FETCH_DAMAGED_ID = "pilco/FetchJointReacherDamaged-v0"
+PENDULUM_ID = "pilco/PendulumSwingUp-v0"
 
 _SPECS = (
     (CARTPOLE_ID, "pilco.envs.cartpole:CartPoleSwingUp", 40, {}),
@@ -54,6 +60,7 @@ _SPECS = (
         50,
         {"damaged_joints": ("elbow_flex",), "damage_mode": "zero"},
     ),
+    (PENDULUM_ID, "pilco.envs.pendulum:PendulumSwingUp", 40, {}),
 )
 
 

@@ -25,6 +25,23 @@ __all__ = [
 ]
 
 
+_KINDS = {"b": "booleans", "U": "strings", "S": "bytes", "c": "complex numbers"}
+
+
+def _numbers(value: Any, name: str, expected: str) -> np.ndarray:
+    """``value`` as a float64 array if it holds real numbers (integers or floats), else a
+    ``TypeError`` naming ``name`` (a string such as ``"0.1"`` is not taken as a number)."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # e.g. ragged nested lists
+        raise TypeError(f"{name} must be {expected}: {exc}") from exc
+    if arr.dtype.kind not in "iuf":
+        got = _KINDS.get(arr.dtype.kind) or (
+            type(value).__name__ if arr.ndim == 0 else "objects")
+        raise TypeError(f"{name} must be {expected}, got {got}")
+    return arr.astype(np.float64)
+
+
 def vector(value: Any, size: int, name: str, *, layout: str = "") -> np.ndarray:
     """Convert ``value`` to a new finite float64 array of shape ``(size,)``.
 
@@ -36,13 +53,10 @@ def vector(value: Any, size: int, name: str, *, layout: str = "") -> np.ndarray:
             ``"[x, x_dot, theta_dot, theta]"``.
 
     Raises:
-        TypeError: not convertible to numbers.
+        TypeError: not numbers (strings, booleans, None and other objects are refused).
         ValueError: wrong shape, or NaN/inf entries.
     """
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be array-like of {size} numbers: {exc}") from exc
+    arr = _numbers(value, name, f"array-like of {size} numbers")
     if arr.shape != (size,):
         shape = f"({size},) = {layout}" if layout else f"({size},)"
         raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
@@ -54,10 +68,7 @@ def vector(value: Any, size: int, name: str, *, layout: str = "") -> np.ndarray:
 def std(value: Any, size: int, name: str) -> np.ndarray:
     """Standard deviations: a scalar or shape ``(size,)``, finite and ``>= 0``, returned
     as a new float64 array of shape ``(size,)``."""
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a number or array of shape ({size},): {exc}") from exc
+    arr = _numbers(value, name, f"a number or array of shape ({size},)")
     if arr.shape not in ((), (1,), (size,)):
         raise ValueError(f"{name} must be a scalar or have shape ({size},), got shape {arr.shape}")
     arr = np.broadcast_to(arr, (size,)).copy()

@@ -157,10 +157,14 @@ class CartPoleSwingUp(CartPolePhysics, gymnasium.Env):
             ``(observation of shape (4,), info)``; ``info["tip_distance"]`` and
             ``info["state"]`` (true state, shape ``(4,)``).
         """
-        super().reset(seed=check.seed(seed))
+        # every argument is checked before anything changes (the seed included)
+        seed = check.seed(seed)
         options = check.reset_options(options, ("state",))
-        if "state" in options:
-            self.state = self._as_state(options["state"], "options['state']")
+        state = (self._as_state(options["state"], "options['state']") if "state" in options
+                 else None)
+        super().reset(seed=seed)
+        if state is not None:
+            self.state = state
         else:
             self.state = self.start_mean + self.start_std * self.np_random.standard_normal(4)
         self._elapsed_steps = 0

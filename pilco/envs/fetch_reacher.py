@@ -249,14 +249,16 @@ class FetchJointReacher(gymnasium.Env):
         Returns:
             ``(observation (10,), info)``.
         """
-        super().reset(seed=check.seed(seed))
+        # every argument is checked before anything changes (the seed, the target)
+        seed = check.seed(seed)
         options = check.reset_options(options, ("qpos", "target"))
-        if "target" in options:
-            self._arm.target = check.vector(options["target"], 3, "options['target']")
-        if "qpos" in options:
-            q = check.vector(options["qpos"], 7, "options['qpos']")
-        else:
-            q = self.start_qpos
+        target = (check.vector(options["target"], 3, "options['target']")
+                  if "target" in options else None)
+        q = (check.vector(options["qpos"], 7, "options['qpos']") if "qpos" in options
+             else self.start_qpos)
+        super().reset(seed=seed)
+        if target is not None:
+            self._arm.target = target
         if self.start_noise > 0:
             q = q + self.start_noise * self.np_random.standard_normal(7)
         q = np.clip(q, self._lower, self._upper)

@@ -178,13 +178,16 @@ class Experiment(RunRecord):
     def session(self) -> Iterator["Experiment"]:
         """Time the session and, on Ctrl-C or SIGTERM, save everything and stop cleanly.
 
-        After an interrupt ``self.interrupted`` is True and the block is left without the
-        exception.
+        A run without episodes writes its progress first, so that ``--resume`` finds its
+        settings even after a kill in the first episode. After an interrupt
+        ``self.interrupted`` is True and the block is left without the exception.
         """
         self._t_start = time.perf_counter()
         try:
             with sigterm_as_keyboard_interrupt():
                 try:
+                    if not self.episodes:
+                        self.save_progress()
                     yield self
                     # a SIGTERM after the last safe point: everything is saved already
                     if stop_requested():

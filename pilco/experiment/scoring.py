@@ -2,14 +2,15 @@
 rule, and the per-episode record written to ``summary.json``."""
 from __future__ import annotations
 
-from typing import Any, Dict
+from typing import Any, Callable, Dict
 
 import numpy as np
 
 from .config import ExperimentConfig
 from .episode import Episode
 
-__all__ = ["PHASES", "saturating_cost", "episode_solved", "episode_record", "summarise"]
+__all__ = ["PHASES", "saturating_cost", "distances_solved", "episode_solved",
+           "solved_in_last_episode", "episode_record", "summarise"]
 
 #: the timed phases of a learned episode, as in the paper's timing table
 PHASES = ("interaction", "model", "policy")
@@ -22,9 +23,15 @@ def saturating_cost(distance, width: float) -> np.ndarray:
 
 
 def episode_solved(episode: Episode, config: ExperimentConfig) -> bool:
-    """Whether an episode meets the task's rule: ``"reach"``, any state within
-    ``success_threshold``; ``"hold"``, the last ``hold_steps`` states all within it."""
-    d = episode.distances[1:]
+    """Whether an episode meets the task's rule (:func:`distances_solved`)."""
+    return distances_solved(episode.distances, config)
+
+
+def distances_solved(distances, config: ExperimentConfig) -> bool:
+    """The task's rule on an episode's distances ``[T+1]`` (the start state is not
+    counted): ``"reach"``, any state within ``success_threshold``; ``"hold"``, the last
+    ``hold_steps`` states all within it."""
+    d = np.asarray(distances, dtype=np.float64)[1:]
     if len(d) == 0 or not np.all(np.isfinite(d)):
         return False
     thr = config.success_threshold
@@ -32,6 +39,18 @@ def episode_solved(episode: Episode, config: ExperimentConfig) -> bool:
         return bool(np.any(d < thr))
     k = config.hold_steps
     return bool(len(d) >= k and np.all(d[-k:] < thr))
+
+
+def solved_in_last_episode(config: ExperimentConfig) -> Callable[[Dict[str, Any]], bool]:
+    """``summary -> bool``: the run's last episode is a learned one that meets the
+    solved rule (a success rule: the task is still solved at the end of the run)."""
+
+    def success(summary: Dict[str, Any]) -> bool:
+        episodes, distances = summary["episodes"], summary["distances"]
+        return bool(episodes and not episodes[-1]["random"]
+                    and distances_solved(distances[-1], config))
+
+    return success
 
 
 def episode_record(episode: Episode, number: int, seconds: Dict[str, float],

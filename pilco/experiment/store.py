@@ -9,10 +9,13 @@
   to continue with the next episode;
 - ``summary.json``: the run's summary.
 
-Each file is written atomically (:mod:`pilco.files`), in the order data, agent,
-progress: a run stopped at any moment (even by SIGKILL) leaves every file either in its
-old or its new complete version, and ``progress.json`` never counts an episode whose
-data are not in ``data.npz``.
+Each file is written atomically (:mod:`pilco.files`): ``progress.json`` (0 episodes)
+when a run starts, then after every episode in the order data, agent, progress. A run
+stopped at any moment (even by SIGKILL) leaves every file either in its old or its new
+complete version; ``agent.npz`` is never older than what ``progress.json`` counts (unless
+saving it failed, which is logged), and ``progress.json`` never counts an episode whose
+data are not in ``data.npz`` (also after a failed data write). ``tests/test_hard_kill.py``
+kills runs at every write.
 """
 from __future__ import annotations
 
@@ -44,6 +47,9 @@ class RunStore:
         self.data_path, self.agent_path, self.progress_path, self.summary_path = (
             self.path(name) for name in ("data.npz", "agent.npz", "progress.json",
                                          "summary.json"))
+        #: episodes in ``data.npz`` as last written or read by this store: what
+        #: ``progress.json`` may count (a failed data write leaves the old file)
+        self.saved_episodes = 0
 
     def path(self, name: str) -> str:
         """Absolute path of ``name`` inside the run directory."""
@@ -72,6 +78,7 @@ class RunStore:
             arrays["partial_states"] = partial.states
             arrays["partial_actions"] = partial.actions
         write_npz_atomic(self.data_path, arrays)
+        self.saved_episodes = len(episodes)
 
     def save_agent(self, agent) -> bool:
         """``agent.save(agent.npz)``; a failure is logged (the data are already safe)."""
@@ -98,6 +105,8 @@ class RunStore:
         """The episodes counted in ``records`` (from ``progress.json``) and their
         predictions, read from ``data.npz``."""
         episodes, predictions = [], []
+        if not records:  # progress written before the first episode's data
+            return episodes, predictions
         with np.load(self.data_path) as data:
             for i, record in enumerate(records, start=1):
                 missing = [k for k in ("states", "actions", "rewards", "distances")
@@ -113,6 +122,7 @@ class RunStore:
                     name: data[k] for k, (name, _, number) in
                     ((k, k.rpartition("_")) for k in data.files)
                     if number == str(i) and name.startswith(PREDICTION_PREFIXES)})
+        self.saved_episodes = len(episodes)
         return episodes, predictions
 
     def load_agent(self):
@@ -132,12 +142,15 @@ class RunStore:
 
 
 def progress_record(exp) -> Dict[str, Any]:
-    """What ``progress.json`` holds for :class:`~pilco.experiment.Experiment` ``exp``."""
+    """What ``progress.json`` holds for :class:`~pilco.experiment.Experiment` ``exp``: it
+    counts only the episodes whose data are in ``data.npz`` (after a failed data write,
+    the newest episode is not counted)."""
+    done = min(len(exp.episodes), exp.store.saved_episodes)
     return {
         "config": dataclasses.asdict(exp.config),
         "args": exp.args,
-        "episodes_done": len(exp.episodes),
-        "records": exp.records,
+        "episodes_done": done,
+        "records": exp.records[:done],
         "seconds": exp.seconds,
         # process CPU time of the model / policy phases per episode number: a check on
         # wall times measured on a busy machine

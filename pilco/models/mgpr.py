@@ -18,7 +18,9 @@ Hyperparameter safety (documented defaults):
   outside. Without it a noise-free target drives ``sn`` to the floor and ``sf`` up, and
   moment matching loses its precision (``sf^2 - tr(K^-1 Q)`` cancels);
 - a Cholesky failure during training is caught: the best values seen so far are
-  restored, the noise is raised, and a warning is logged.
+  restored, the noise is raised (unless it is fixed), and a warning is logged;
+- a hyperparameter made non-trainable (``gpflow.set_trainable(p, False)``) keeps the
+  value it was given through training, restarts and failures included.
 """
 from __future__ import annotations
 
@@ -30,6 +32,7 @@ import numpy as np
 import tensorflow as tf
 
 from .. import moments
+from ..seeding import generator
 from ..snapshots import Stalled, TrackingScipy, restore, snapshot
 from ..validation import (
     check_data,
@@ -44,6 +47,12 @@ from ..validation import (
 __all__ = ["MGPR"]
 
 logger = logging.getLogger(__name__)
+
+
+def _assign_free(param: gpflow.Parameter, value) -> None:
+    """Assign ``value`` unless ``param`` is fixed (non-trainable): set by the user, kept."""
+    if param.trainable:
+        param.assign(value)
 
 
 class MGPR(gpflow.base.Module):
@@ -91,9 +100,15 @@ class MGPR(gpflow.base.Module):
 
     def initialize_hyperparameters(self, rng: Optional[np.random.Generator] = None,
                                    spread: float = 0.0):
-        """Data-driven starting values, optionally perturbed log-normally by ``spread``."""
+        """Data-driven starting values, optionally perturbed log-normally by ``spread``.
+
+        A hyperparameter made non-trainable (``gpflow.set_trainable(p, False)``, e.g. a
+        noise variance fixed by the user) keeps its value: restarts start from new values
+        of the trainable ones only.
+        """
         X = self._X.numpy()
-        rng = rng or np.random.default_rng()
+        if rng is None and spread:
+            rng = generator()
         ell0 = np.std(X, axis=0) if len(X) > 1 else np.ones(self.num_dims)
         # a constant input (a joint that never moves) carries no scale: start it at 1
         ell0 = np.where(ell0 > 1e-8, np.maximum(ell0, 1e-3), 1.0)
@@ -101,10 +116,12 @@ class MGPR(gpflow.base.Module):
             y = self._Y[i].numpy()
             var = float(np.var(y)) if len(y) > 1 else 1.0
             var = max(var, 1e-6)
-            jitter = lambda size: np.exp(spread * rng.standard_normal(size))  # noqa: E731
-            model.kernel.lengthscales.assign(ell0 * jitter(self.num_dims))
-            model.kernel.variance.assign(var * jitter(1)[0])
-            model.likelihood.variance.assign(max(0.01 * var * jitter(1)[0], 2 * self.noise_floor))
+            jitter = lambda size: (np.exp(spread * rng.standard_normal(size))  # noqa: E731
+                                   if spread else np.ones(size))
+            _assign_free(model.kernel.lengthscales, ell0 * jitter(self.num_dims))
+            _assign_free(model.kernel.variance, var * jitter(1)[0])
+            _assign_free(model.likelihood.variance,
+                         max(0.01 * var * jitter(1)[0], 2 * self.noise_floor))
 
     # -- data -----------------------------------------------------------------------------
     @property
@@ -226,7 +243,7 @@ class MGPR(gpflow.base.Module):
         restarts = check_positive_int(restarts, "restarts")
         patience = check_positive_int(patience, "patience")
         min_rel_improvement = check_min_rel_improvement(min_rel_improvement)
-        rng = np.random.default_rng(check_seed(seed))
+        rng = generator(check_seed(seed))
         opt = self._optimizer  # one instance: its compiled objective is reused across calls
         groups = self._selection_groups()
         best_losses = [np.inf] * len(groups)
@@ -276,7 +293,7 @@ class MGPR(gpflow.base.Module):
                 self._restore(groups, best_values)
                 for model in self.models:
                     v = float(model.likelihood.variance.numpy())
-                    model.likelihood.variance.assign(max(10 * v, 100 * self.noise_floor))
+                    _assign_free(model.likelihood.variance, max(10 * v, 100 * self.noise_floor))
             failed = record()
             if failed:
                 logger.warning("GP training run %d ended at a non-finite loss (a numerically "

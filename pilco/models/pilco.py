@@ -16,6 +16,7 @@ import gpflow
 import numpy as np
 import tensorflow as tf
 
+from ..seeding import generator
 from ..validation import (
     check_bool,
     check_columns,
@@ -265,7 +266,7 @@ class PILCO(gpflow.base.Module):
         patience = check_positive_int(patience, "patience")
         method = check_option(method, POLICY_METHODS, "method", ignore_case=True)
         min_rel_improvement = check_min_rel_improvement(min_rel_improvement)
-        rng = np.random.default_rng(check_seed(seed))
+        rng = generator(check_seed(seed))
         if restarts > 1 and not callable(getattr(self.controller, "randomize", None)):
             raise ValueError(f"restarts > 1 needs a controller with a randomize(seed=...) "
                              f"method; {type(self.controller).__name__} has none")

@@ -11,8 +11,7 @@ One step (MATLAB PILCO's ``propagate``) maps the state distribution ``x_t ~ N(m,
 4. ``x_{t+1} = x_t + Δ`` with every cross-covariance kept.
 
 The whole horizon is one ``tf.while_loop`` inside a compiled function, traced once; the
-dynamics GP's factorisation (Cholesky, ``beta``, ``K^-1`` and the pair weights of the
-output covariance) does not depend on the policy: :meth:`Rollout.refresh` computes it
+dynamics GP's factorisation (Cholesky, ``beta`` and ``K^-1``) does not depend on the policy: :meth:`Rollout.refresh` computes it
 once per policy optimisation and stores it in non-trainable variables that the compiled
 functions read.
 """
@@ -56,15 +55,14 @@ class Rollout(gpflow.base.Module):
         self.angle_indices = tuple(angle_indices)
         self.policy_input_noise = policy_input_noise
         inputs = D + len(self.angle_indices) + control_dim  # GP input size
-        pairs = D * (D + 1) // 2  # pairs of GP outputs (one per state dimension)
         f = default_float()
         # The dynamics model as of the last refresh(): its centers [n, inputs], beta [D, n],
-        # pair weights [pairs, n, n], lengthscales [D, inputs], signal and noise variances [D].
+        # K^-1 [D, n, n], lengthscales [D, inputs], signal and noise variances [D].
         self._centers = tf.Variable(tf.zeros([0, inputs], f), shape=[None, inputs],
                                     trainable=False)
         self._beta = tf.Variable(tf.zeros([D, 0], f), shape=[D, None], trainable=False)
-        self._pair_weights = tf.Variable(tf.zeros([pairs, 0, 0], f), shape=[pairs, None, None],
-                                         trainable=False)
+        self._inverse = tf.Variable(tf.zeros([D, 0, 0], f), shape=[D, None, None],
+                                    trainable=False)
         self._lengthscales = tf.Variable(tf.ones([D, inputs], f), trainable=False)
         self._signal_variance = tf.Variable(tf.ones([D], f), trainable=False)
         self._noise_variance = tf.Variable(tf.ones([D], f), trainable=False)
@@ -74,7 +72,7 @@ class Rollout(gpflow.base.Module):
         factorization = dynamics_model.factorize()
         self._centers.assign(factorization.centers)
         self._beta.assign(factorization.beta)
-        self._pair_weights.assign(moments.pair_weights(factorization.beta, factorization.iK))
+        self._inverse.assign(factorization.iK)
         self._lengthscales.assign(factorization.lengthscales)
         self._signal_variance.assign(factorization.variance)
         self._noise_variance.assign(dynamics_model.noise_variance)
@@ -82,12 +80,12 @@ class Rollout(gpflow.base.Module):
     def dynamics(self) -> moments.Predictor:
         """The dynamics model of the last :meth:`refresh`, as loop-invariant pieces."""
         factorization = moments.Factorization(
-            tf.convert_to_tensor(self._centers), tf.convert_to_tensor(self._beta), None,
+            tf.convert_to_tensor(self._centers), tf.convert_to_tensor(self._beta),
+            tf.convert_to_tensor(self._inverse),
             tf.convert_to_tensor(self._lengthscales),
             tf.convert_to_tensor(self._signal_variance),
         )
-        return moments.prepare(factorization, W=tf.convert_to_tensor(self._pair_weights),
-                               deterministic=False)
+        return moments.prepare(factorization, constant=True, deterministic=False)
 
     def step(self, m, s, dynamics: moments.Predictor, prepared):
         """One moment-matched step: m [1, D], s [D, D] -> m' [1, D], s' [D, D].

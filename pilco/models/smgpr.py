@@ -10,6 +10,7 @@ import tensorflow as tf
 from gpflow.config import default_jitter
 
 from .. import moments
+from ..seeding import generator
 from ..validation import check_positive_int
 from .mgpr import MGPR
 
@@ -49,7 +50,7 @@ class SMGPR(MGPR):
                          max_lengthscale_ratio=max_lengthscale_ratio, name=name)
 
     def _build_models(self, X, Y):
-        rng = np.random.default_rng(self._seed)
+        rng = generator(self._seed)
         M = self.num_induced_points
         rows = rng.choice(len(X), size=M, replace=len(X) < M)
         Z = X[rows] + (1e-3 * rng.standard_normal((M, X.shape[1])) if len(X) < M else 0.0)

@@ -15,7 +15,6 @@ from __future__ import annotations
 import inspect
 import json
 import logging
-import os
 from typing import Any, Dict, List, Sequence, Tuple
 
 import gpflow
@@ -26,6 +25,7 @@ from ..controllers import LinearController, RbfController, squash_sat, squash_si
 from ..deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
 from ..files import write_npz_atomic
 from ..rewards import CartPoleReward, CombinedRewards, ExponentialReward, LinearReward
+from ..validation import check_format_version, check_path
 from .mgpr import MGPR
 from .smgpr import SMGPR
 
@@ -45,7 +45,7 @@ _SQUASH_KIND = {None: "none", "squash_sin": "sin", "squash_sat": "sat"}
 # -- files ----------------------------------------------------------------------------------
 def _read_npz(path, expected_format: str):
     """Arrays and metadata of a file written by this module; clear errors otherwise."""
-    path = os.fspath(path)
+    path = check_path(path)
     arrays, meta = read_npz(path, expected_format)
     if meta.get("format") != expected_format:
         raise ValueError(f"{path} holds format {meta.get('format')!r}, expected "
@@ -267,10 +267,7 @@ def read_agent(path) -> Tuple[Dict[str, Any], Any]:
     """Read an agent file: the ``PILCO`` constructor's keyword arguments, and a function
     that assigns the stored dynamics-model values to the rebuilt agent's ``mgpr``."""
     arrays, meta = _read_npz(path, AGENT_FORMAT)
-    version = meta.get("version")
-    if not isinstance(version, int) or version > AGENT_VERSION:
-        raise ValueError(f"{path} has agent format version {version!r}; this pilco "
-                         f"({__version__}) reads versions up to {AGENT_VERSION}")
+    check_format_version(meta, path, "agent", AGENT_VERSION, f"this pilco ({__version__})")
     trainable = meta.get("trainable", {})
     spec = meta["gp"]
     if spec.get("type") not in ("MGPR", "SMGPR"):
@@ -335,14 +332,17 @@ def policy_arrays(controller, state_dim: int,
 # -- files ----------------------------------------------------------------------------------
 def save_agent(agent, path) -> str:
     """Write :func:`agent_arrays` of ``agent`` to ``path`` atomically; returns the path."""
-    written = write_npz_atomic(path, agent_arrays(agent))
+    written = write_npz_atomic(check_path(path), agent_arrays(agent))
     logger.info("saved PILCO agent (%d transitions) to %s", len(agent.data[0]), written)
     return written
 
 
 def load_agent(agent_class, path):
     """Rebuild the agent stored at ``path`` as an instance of ``agent_class`` (PILCO)."""
-    kwargs, restore = read_agent(path)
+    try:
+        kwargs, restore = read_agent(path)
+    except KeyError as err:  # a metadata entry of the format is missing
+        raise ValueError(f"{path} is incomplete: its metadata lack {err.args[0]!r}") from None
     agent = agent_class(**kwargs)
     restore(agent.mgpr)
     logger.info("loaded PILCO agent from %s", path)
@@ -351,6 +351,7 @@ def load_agent(agent_class, path):
 
 def export_policy(controller, path, state_dim: int, angle_indices: Sequence[int]) -> str:
     """Write :func:`policy_arrays` to ``path`` atomically; returns the path written."""
-    written = write_npz_atomic(path, policy_arrays(controller, state_dim, angle_indices))
+    written = write_npz_atomic(check_path(path),
+                               policy_arrays(controller, state_dim, angle_indices))
     logger.info("exported %s policy to %s", type(controller).__name__, written)
     return written

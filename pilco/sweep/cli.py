@@ -30,7 +30,7 @@ __all__ = ["DEFAULT_TASKS", "task_names", "task_parser", "parse_seeds", "parse_a
 logger = logging.getLogger("pilco.sweep")
 
 #: the tasks when :mod:`pilco.tasks` does not list them itself
-DEFAULT_TASKS = ("cartpole", "reacher", "damaged_reacher", "adaptation")
+DEFAULT_TASKS = ("cartpole", "reacher", "damaged_reacher", "adaptation", "pendulum")
 
 #: flags the sweep passes to every run itself (``--set``/``--grid`` keys may not name them)
 RESERVED = ("seed", "output", "resume", "quiet", "no_render", "no_figures", "help")
@@ -203,6 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="examples:\n"
                "  python -m pilco.sweep cartpole --seeds 0-19\n"
                "  python -m pilco.sweep reacher --seeds 0-9 --grid cost_width=0.2,0.3\n"
+               "  python -m pilco.sweep pendulum --seeds 0-9\n"
                "  python -m pilco.sweep cartpole --seeds 0,3,5 --set no_early_stop=true "
                "-- --episodes 10\n"
                "  python -m pilco.sweep cartpole --seeds 0-99 --address auto "

@@ -8,10 +8,13 @@ task                    module
 ``reacher``             :mod:`pilco.tasks.reacher`, the 7-DoF Fetch arm
 ``damaged_reacher``     :mod:`pilco.tasks.reacher` with ``damaged=True``
 ``adaptation``          :mod:`pilco.tasks.adaptation`, damage in the middle of a run
+``pendulum``            :mod:`pilco.tasks.pendulum`, the reference port's Pendulum-v1
 ======================  =============================================================
 
 ``python -m pilco.tasks TASK [flags]`` runs a task exactly as ``examples/TASK.py
-[flags]`` does (the seed-sweep tool starts every run that way).
+[flags]`` does (the seed-sweep tool starts every run that way); ``pendulum`` runs the
+workload of ``examples/pendulum.py``, a script in the paper code's style, with the
+experiment loop (its run directory, summary, resume and figures).
 """
 from __future__ import annotations
 
@@ -26,6 +29,7 @@ TASKS = {
     "reacher": ("reacher", {}),
     "damaged_reacher": ("reacher", {"damaged": True}),
     "adaptation": ("adaptation", {}),
+    "pendulum": ("pendulum", {}),
 }
 
 

@@ -16,7 +16,9 @@ Settings the paper leaves open (chosen here, every one a flag):
 - ``--cost-width`` σ_c = 0.2 m (damaged arm: 0.4 m, it starts ~1.1 m away where a 0.2 m
   cost is flat) of the saturating cost ``1 - exp(-d² / (2 σ_c²))`` on the gripper
   position (``ExponentialReward`` with ``W = diag(1/σ_c², 1/σ_c², 1/σ_c², 0...)``);
-  ``--fine-cost-width`` adds a narrow second cost (``CombinedRewards``).
+  ``--fine-cost-width`` 0.05 m (healthy arm; damaged: none) adds a narrow second cost
+  (``CombinedRewards``): the reacher's failures were mostly close misses and stalls, and
+  with it seeds 0-19 succeed 14/20 instead of 11/20 (README, "Success rates").
 - ``--start-var`` 1e-4: the initial state distribution is N(start observation, 1e-4·I).
 - ``--policy-iters`` 25 and ``--model-iters`` 100 L-BFGS iterations, 1 restart each.
 - GP-input columns that are constant in the data (a damaged joint) get a long lengthscale
@@ -68,9 +70,9 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
     g = parser.add_argument_group("reacher")
     g.add_argument("--cost-width", type=float, default=0.4 if damaged else 0.2,
                    help="σ_c [m] of the saturating cost on the gripper-target distance")
-    g.add_argument("--fine-cost-width", type=float, default=None,
+    g.add_argument("--fine-cost-width", type=float, default=None if damaged else 0.05,
                    help="add a second, narrow saturating cost of this width [m] (more "
-                        "precision near the target); default: none")
+                        "precision near the target; 0: none)")
     g.add_argument("--planning-horizon", type=int, default=None,
                    help="steps the policy is optimised over (default: --horizon)")
     g.add_argument("--start-var", type=float, default=1e-4,

@@ -1,0 +1,104 @@
+"""Policy restarts (``optimize_policy(restarts=k)``): the first run continues from the
+current policy, every further run starts from ``controller.randomize``, and the best
+policy evaluated by any run is the one left in place and returned."""
+import numpy as np
+import pytest
+
+from pilco.controllers import RbfController
+from pilco.models import PILCO
+from pilco.rewards import ExponentialReward
+
+D, U = 2, 1
+
+
+def make_agent():
+    rng = np.random.default_rng(3)
+    X = rng.uniform(-1.0, 1.0, (30, D + U))
+    # a smooth system: the state moves by the action and decays a little
+    Y = np.column_stack([0.3 * X[:, 2] - 0.1 * X[:, 0], 0.2 * X[:, 2] - 0.1 * X[:, 1]])
+    controller = RbfController(D, U, 5, max_action=1.0, seed=0)
+    reward = ExponentialReward(D, W=np.eye(D), t=np.array([[0.5, 0.3]]))
+    agent = PILCO((X, Y), controller, reward, horizon=5, m_init=np.zeros((1, D)),
+                  S_init=0.01 * np.eye(D))
+    agent.optimize_models(maxiter=30, seed=0)
+    return agent
+
+
+def parameters(agent):
+    return [v.numpy().copy() for v in agent.controller.trainable_variables]
+
+
+def put(agent, values):
+    for v, value in zip(agent.controller.trainable_variables, values):
+        v.assign(value)
+
+
+@pytest.fixture(scope="module")
+def shared():
+    """One trained model (tracing is paid once); each test starts from its first policy."""
+    agent = make_agent()
+    return agent, parameters(agent)
+
+
+@pytest.fixture
+def agent(shared):
+    agent, start = shared
+    put(agent, start)
+    return agent
+
+
+def test_later_restarts_that_end_worse_do_not_replace_the_first_runs_policy(agent,
+                                                                            monkeypatch):
+    """Restarts whose start is made useless (zero weights, tiny lengthscales: no action
+    anywhere, no gradient) end worse than the continued run; its policy must stay."""
+    start = parameters(agent)
+    single = agent.optimize_policy(maxiter=10, restarts=1, seed=0)
+    single_policy = parameters(agent)
+    put(agent, start)
+
+    calls = []
+
+    def useless_start(seed=None):
+        calls.append(seed)
+        c = agent.controller
+        c.targets.assign(np.zeros(c.targets.shape))
+        c.centers.assign(np.full(c.centers.shape, 50.0))
+        for g in c.models:
+            g.kernel.lengthscales.assign(np.full(D, 0.05))
+
+    monkeypatch.setattr(agent.controller, "randomize", useless_start)
+    best = agent.optimize_policy(maxiter=10, restarts=3, seed=0)
+    assert len(calls) == 2
+    assert np.isclose(best, single, rtol=1e-9)
+    assert np.isclose(agent.expected_return(), best, rtol=1e-9)
+    for v, value in zip(parameters(agent), single_policy):
+        np.testing.assert_allclose(v, value, rtol=1e-9, atol=1e-12)
+
+
+def test_a_better_restart_replaces_the_first_runs_policy(agent, monkeypatch):
+    """A restart that starts from a better policy than the first run reaches wins."""
+    start = parameters(agent)
+    agent.optimize_policy(maxiter=30, restarts=1, seed=0)
+    good, good_return = parameters(agent), agent.expected_return()
+    put(agent, start)
+    first_only = agent.optimize_policy(maxiter=1, restarts=1, seed=0)
+    put(agent, start)
+    assert good_return > first_only  # the constructed case: the restart's start is better
+
+    def good_start(seed=None):
+        put(agent, good)
+
+    monkeypatch.setattr(agent.controller, "randomize", good_start)
+    best = agent.optimize_policy(maxiter=1, restarts=2, seed=0)
+    assert best >= good_return - 1e-9
+    assert np.isclose(agent.expected_return(), best, rtol=1e-9)
+
+
+def test_restarts_are_repeatable_with_a_seed(agent):
+    start = parameters(agent)
+    first = agent.optimize_policy(maxiter=5, restarts=2, seed=7)
+    first_policy = parameters(agent)
+    put(agent, start)
+    assert agent.optimize_policy(maxiter=5, restarts=2, seed=7) == first
+    for x, y in zip(parameters(agent), first_policy):
+        np.testing.assert_array_equal(x, y)
