@@ -4,13 +4,16 @@ Reopens a run directory written by a task (``python -m pilco.tasks``, the exampl
 seed sweep), diagnoses learned episode K (default the last) with
 :func:`pilco.experiment.diagnose.diagnose` (the checks and the verdict rules are in that
 module's docstring), prints the report, writes it to ``RUN_DIR/diagnosis.json`` and logs
-the verdict. Runs of the tasks ``reacher``, ``damaged_reacher`` and ``cartpole`` are
-reopened through their task (its agent builder replays the learning of an earlier
-episode); other runs through their saved agent, which is enough for the last episode.
+the verdict. Runs of the tasks ``reacher``, ``damaged_reacher``, ``cartpole`` and
+``pendulum`` are reopened through their task (its agent builder replays the learning of an
+earlier episode); other runs (``adaptation``, whose arm breaks during the run) through
+their saved agent, which is enough for the last episode, and their candidate policies run
+on the real system only where the run's environment can be made from its settings.
 """
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import os
 import sys
@@ -24,7 +27,7 @@ __all__ = ["open_run", "build_parser", "main"]
 logger = logging.getLogger(__name__)
 
 #: tasks whose runs can be reopened with their agent builder
-REOPENABLE = ("reacher", "damaged_reacher", "cartpole")
+REOPENABLE = ("reacher", "damaged_reacher", "cartpole", "pendulum")
 
 
 def open_run(directory: str):
@@ -42,10 +45,9 @@ def open_run(directory: str):
 
             damaged = task == "damaged_reacher"
             return reacher.make_experiment(reacher.parse_args(argv, damaged), task, damaged)
-        if task == "cartpole":
-            from .tasks import cartpole
-
-            return cartpole.make_experiment(cartpole.parse_args(argv))
+        if task in REOPENABLE:
+            module = importlib.import_module(f"{__package__}.tasks.{task}")
+            return module.make_experiment(module.parse_args(argv))
     finally:
         logging.getLogger().setLevel(level)  # the task's parser sets the run's log level
     logger.info("task %r is not reopened through its task: the saved agent is used", task)
@@ -90,9 +92,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from .experiment.report import format_diagnosis
 
     exp = open_run(args.run_dir)
+    rollouts = not args.no_rollouts
+    if rollouts and exp.config.task == "adaptation":
+        logger.warning("the adaptation task breaks the arm during the run: the candidate "
+                       "policies are not run on the real system")
+        rollouts = False
     try:
         result = diagnose(exp, args.episode, restarts=args.restarts, seed=args.seed,
-                          rollouts=not args.no_rollouts, replay=args.replay)
+                          rollouts=rollouts, replay=args.replay)
     finally:
         exp.close()
     path = write_diagnosis(result, args.output or os.path.join(args.run_dir, "diagnosis.json"))

@@ -131,8 +131,8 @@ def test_the_command_line_prints_the_report_and_writes_the_json(run_dir, tmp_pat
 
     out = tmp_path / "d.json"
     # a run of no known task is reopened through its saved agent (enough for the last
-    # episode); its env is not registered, so the candidates are not rolled out
-    assert cli.main([run_dir, "--restarts", "0", "--no-rollouts", "--output", str(out),
+    # episode); its env id is not registered, so the candidates are not rolled out
+    assert cli.main([run_dir, "--restarts", "0", "--output", str(out),
                      "--log-level", "WARNING"]) == 0
     printed = capsys.readouterr().out
     saved = json.loads(out.read_text())

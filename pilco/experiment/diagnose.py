@@ -240,7 +240,13 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
              "open_loop": open_loop_check(agent, ep, geometry, exp.config.success_threshold),
              "multi_step": multi_step_check(view, agent, ep, geometry, thresholds)}
     objective = objective_check(agent, ep, geometry, thresholds)
-    env = view.make_env() if rollouts else None
+    env = None
+    if rollouts:
+        try:
+            env = view.make_env()
+        except Exception as err:  # noqa: BLE001 - the rollouts are optional evidence
+            logger.warning("the run's environment cannot be made (%s): the candidate "
+                           "policies are not run on the real system", err)
     optimiser = optimiser_check(view, number, geometry, restarts, seed, env, thresholds)
     rerun_error = None
     if env is not None:
