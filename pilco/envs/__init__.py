@@ -29,6 +29,7 @@ import logging
 import gymnasium
 
 from pilco.envs.cartpole import CartPoleSwingUp
+from pilco.envs.fetch_reach_bound import ReachBound, fewest_steps
 from pilco.envs.fetch_reacher import ARM_JOINTS, FetchJointReacher
 from pilco.envs.pendulum import PendulumSwingUp
 
@@ -43,6 +44,8 @@ __all__ = [
     "FetchJointReacher",
     "PENDULUM_ID",
     "PendulumSwingUp",
+    "ReachBound",
+    "fewest_steps",
     "register_envs",
 ]
 
