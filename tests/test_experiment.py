@@ -119,6 +119,11 @@ def test_a_run_collects_saves_and_summarises_every_episode(tmp_path):
     progress = json.load(open(exp.store.progress_path))
     assert progress["episodes_done"] == 4 and progress["complete"] is True
     assert json.load(open(exp.store.summary_path)) == json.loads(json.dumps(summary))
+    # where the numbers came from: this checkout's commit, the versions, the CPU
+    prov = summary["provenance"]
+    assert prov["versions"]["numpy"] == np.__version__ and prov["cpu"]
+    if prov["git"] is not None:
+        assert len(prov["git"]["commit"]) == 40 and isinstance(prov["git"]["dirty"], bool)
 
 
 def test_an_unchanged_training_set_is_not_refitted(tmp_path):

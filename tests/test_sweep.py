@@ -129,6 +129,24 @@ def test_aggregate_fields():
     assert empty["finished"] == 0 and empty["failed"] == 2
 
 
+def test_provenance_counts_commits_cpus_and_onednn_settings():
+    def prov(commit, dirty=False, cpu="cpu A", onednn=None):
+        env = {} if onednn is None else {"TF_ENABLE_ONEDNN_OPTS": onednn}
+        git = None if commit is None else {"commit": commit, "dirty": dirty}
+        return {"git": git, "cpu": cpu, "environment": env}
+
+    runs_ = [summary(0, provenance=prov("a" * 40)),
+             summary(1, provenance=prov("a" * 40, onednn="0")),
+             summary(2, provenance=prov("b" * 40, dirty=True, cpu="cpu B")),
+             summary(3, provenance=prov(None)),
+             summary(4)]
+    r = aggregate.aggregate_setting(runs_)["provenance"]
+    assert r["commit"] == {"a" * 12: 2, "b" * 12 + "-dirty": 1, "not a git checkout": 1,
+                           "unknown": 1}
+    assert r["cpu"] == {"cpu A": 3, "cpu B": 1, "unknown": 1}
+    assert r["onednn"] == {"default": 3, "0": 1, "unknown": 1}
+
+
 def test_adaptation_adds_episodes_to_recover():
     runs_ = [summary(0, episodes_to_recover=1, damage_at_episode=3),
              summary(1, episodes_to_recover=None, damage_at_episode=3),

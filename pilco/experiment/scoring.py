@@ -8,6 +8,7 @@ import numpy as np
 
 from .config import ExperimentConfig
 from .episode import Episode
+from .provenance import provenance
 
 __all__ = ["PHASES", "saturating_cost", "distances_solved", "episode_solved",
            "solved_in_last_episode", "episode_record", "summarise"]
@@ -78,7 +79,8 @@ def summarise(exp) -> Dict[str, Any]:
     task, seed, ``solved``, ``solved_at_episode``, the episode records, ``seconds`` per
     phase and ``total`` wall time (all sessions; figures excluded), the task's
     ``summary_fields``, ``complete`` (the loop finished), ``distances`` per episode and
-    ``success`` (the task's rule, default ``solved``)."""
+    ``success`` (the task's rule, default ``solved``) and ``provenance`` (code version,
+    library versions, CPU, TensorFlow's arithmetic settings: :mod:`.provenance`)."""
     at = exp.solved_at_episode()
     summary = {
         "task": exp.config.task,
@@ -90,6 +92,7 @@ def summarise(exp) -> Dict[str, Any]:
         **exp.summary_fields,
         "complete": bool(exp.complete),
         "distances": [[float(v) for v in e.distances] for e in exp.episodes],
+        "provenance": provenance(),
     }
     summary["success"] = bool(exp.success_fn(summary) if exp.success_fn else summary["solved"])
     return summary

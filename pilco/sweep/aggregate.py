@@ -20,7 +20,7 @@ import math
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
 __all__ = ["WILSON_Z95", "wilson_interval", "quantile", "quartiles", "run_success",
-           "aggregate_setting", "solved_by_episode", "format_table"]
+           "aggregate_setting", "provenance_counts", "solved_by_episode", "format_table"]
 
 #: the standard normal's 97.5 % quantile: a two-sided 95 % interval
 WILSON_Z95 = 1.959963984540054
@@ -124,8 +124,8 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
     (Wilson), ``episodes_to_solve`` ``{q1, median, q3, solved, unsolved}``,
     ``last_episode`` ``{steps_to_target: {median, reached, not_reached}, final_distance:
     {q1, median, q3}, min_distance: {q1, median, q3}}``, ``seconds_per_run`` ``{median,
-    max}``, and ``episodes_to_recover`` like ``episodes_to_solve`` when the summaries
-    have it (adaptation).
+    max}``, ``provenance`` (:func:`provenance_counts`), and ``episodes_to_recover`` like
+    ``episodes_to_solve`` when the summaries have it (adaptation).
     """
     finished = len(summaries)
     if runs is None:
@@ -157,6 +157,7 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
         },
         "seconds_per_run": {"median": quantile(seconds, 0.5),
                             "max": max(seconds) if seconds else None},
+        "provenance": provenance_counts(summaries),
     }
     if any("episodes_to_recover" in s for s in summaries):
         recover = [math.inf if s.get("episodes_to_recover") is None
@@ -165,6 +166,26 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
             **quartiles(recover), "recovered": sum(1 for v in recover if not math.isinf(v)),
             "not_recovered": sum(1 for v in recover if math.isinf(v))}
     return result
+
+
+def provenance_counts(summaries: Sequence[Mapping[str, Any]]) -> Dict[str, Dict[str, int]]:
+    """How many runs ran which code and arithmetic: ``{"commit": {sha[:12] (+ "-dirty"):
+    runs}, "cpu": {model: runs}, "onednn": {TF_ENABLE_ONEDNN_OPTS or "default": runs}}``
+    from the summaries' ``provenance`` ("unknown" for summaries without it)."""
+    counts: Dict[str, Dict[str, int]] = {"commit": {}, "cpu": {}, "onednn": {}}
+    for s in summaries:
+        p = s.get("provenance")
+        p = p if isinstance(p, Mapping) else {}
+        git = p.get("git") if isinstance(p.get("git"), Mapping) else None
+        commit = "unknown" if not p else "not a git checkout" if git is None else (
+            str(git.get("commit", ""))[:12] + ("-dirty" if git.get("dirty") else ""))
+        env = p.get("environment") if isinstance(p.get("environment"), Mapping) else {}
+        keys = {"commit": commit, "cpu": str(p.get("cpu", "unknown")),
+                "onednn": "unknown" if not p else str(env.get("TF_ENABLE_ONEDNN_OPTS",
+                                                               "default"))}
+        for field, key in keys.items():
+            counts[field][key] = counts[field].get(key, 0) + 1
+    return counts
 
 
 def _num(value: Optional[float], fmt: str = ".3g") -> str:

@@ -407,6 +407,13 @@ def write_report(args: argparse.Namespace, specs: Sequence[RunSpec],
             per_setting[label], runs=len(rows),
             failed=sum(r["status"] == "failed" for r in rows),
             not_run=sum(r["status"] in ("not_run", "missing") for r in rows))
+        for field, what in (("commit", "code versions"), ("onednn", "oneDNN settings"),
+                            ("cpu", "CPU models")):
+            seen = results[label]["provenance"][field]
+            if len(seen) > 1:
+                logger.warning("%s: the runs mix %d %s (%s); their rate is not one "
+                               "setting's", label, len(seen), what,
+                               ", ".join(f"{k}: {v}" for k, v in sorted(seen.items())))
     report = {
         "task": args.task,
         "command": list(getattr(args, "command", [])),
