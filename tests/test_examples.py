@@ -29,7 +29,7 @@ TIMEOUT = 600
 EPISODE_KEYS = {"episode", "random", "steps", "cost", "final_distance", "min_distance",
                 "steps_to_target", "seconds"}
 SUMMARY_KEYS = {"task", "seed", "solved", "solved_at_episode", "episodes", "seconds",
-                "complete", "success", "distances"}
+                "complete", "success", "distances", "provenance"}
 PHASE_KEYS = {"interaction", "model", "policy"}
 FIGURES = ["distance.png", "cost_prediction.png", "one_step.png", "multi_step.png"]
 

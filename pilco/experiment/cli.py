@@ -8,10 +8,11 @@ import logging
 import os
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
+from .loop import Experiment
 from .report import format_episode_table, format_timing_table
 
 __all__ = ["add_common_arguments", "add_preset_argument", "learning_settings",
-           "parse_args_with_resume",
+           "parse_args_with_resume", "parse_task_args", "open_experiment",
            "configure_logging", "finish"]
 
 
@@ -135,6 +136,24 @@ def parse_args_with_resume(parser: argparse.ArgumentParser,
     else:
         args.output = args.output.format(seed=args.seed)
     return args
+
+
+def parse_task_args(parser: argparse.ArgumentParser,
+                    argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    """A task's flags (:func:`parse_args_with_resume`), with logging set up at their
+    ``--log-level``."""
+    args = parse_args_with_resume(parser, argv)
+    configure_logging(args.log_level)
+    return args
+
+
+def open_experiment(args: argparse.Namespace, config, build, **kwargs):
+    """A new :class:`~pilco.experiment.Experiment` of ``config`` in ``args.output``, or
+    the one saved there when ``args.resume`` is set; ``kwargs`` go to either."""
+    kwargs.setdefault("args", vars(args))
+    if args.resume:
+        return Experiment.resume(args.output, config, build, **kwargs)
+    return Experiment(config, args.output, build, **kwargs)
 
 
 def configure_logging(level: str) -> None:

@@ -21,7 +21,7 @@ import os
 from typing import Any, Dict, List, Optional, Sequence
 
 from ..experiment import Experiment
-from ..experiment.cli import configure_logging, finish, parse_args_with_resume
+from ..experiment.cli import finish, parse_task_args
 from . import reacher
 
 __all__ = ["build_parser", "parse_args", "make_experiment", "damage", "run", "figures",
@@ -57,8 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    args = parse_args_with_resume(build_parser(), argv)
-    configure_logging(args.log_level)
+    parser = build_parser()
+    args = parse_task_args(parser, argv)
+    reacher.check_args(parser, args)
     args.episodes = args.random_episodes + args.healthy_episodes + args.damaged_episodes
     return args
 

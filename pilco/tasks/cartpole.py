@@ -27,8 +27,8 @@ from typing import List, Optional, Sequence
 import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
-from ..experiment.cli import (add_common_arguments, configure_logging, finish,
-                              learning_settings, parse_args_with_resume)
+from ..experiment.cli import (add_common_arguments, finish, learning_settings,
+                              open_experiment, parse_task_args)
 
 __all__ = ["build_parser", "init_policy_from_start", "agent_builder", "make_config",
            "make_experiment", "figures", "main"]
@@ -117,10 +117,7 @@ def make_config(args: argparse.Namespace) -> ExperimentConfig:
 
 def make_experiment(args: argparse.Namespace) -> Experiment:
     """A new run in ``args.output``, or the one saved there with ``--resume``."""
-    config, build = make_config(args), agent_builder(args)
-    if args.resume:
-        return Experiment.resume(args.output, config, build, args=vars(args))
-    return Experiment(config, args.output, build, args=vars(args))
+    return open_experiment(args, make_config(args), agent_builder(args))
 
 
 def figures(exp: Experiment, args: argparse.Namespace) -> List[str]:
@@ -136,9 +133,7 @@ def figures(exp: Experiment, args: argparse.Namespace) -> List[str]:
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    args = parse_args_with_resume(build_parser(), argv)
-    configure_logging(args.log_level)
-    return args
+    return parse_task_args(build_parser(), argv)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -35,13 +35,17 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig, make_env
-from ..experiment.cli import (add_common_arguments, add_preset_argument, configure_logging,
-                              finish,
-                              learning_settings, parse_args_with_resume)
+from ..experiment.cli import (add_common_arguments, add_preset_argument, finish,
+                              learning_settings, open_experiment, parse_task_args)
 
-__all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
-           "ignore_constant_inputs", "make_experiment", "figures", "reached_within",
-           "parse_args", "main", "SUCCESS_STEPS"]
+__all__ = ["build_parser", "check_args", "env_kwargs", "make_config", "agent_builder",
+           "ignore_constant_inputs", "limit_bumps", "make_experiment", "figures",
+           "reached_within", "parse_args", "main", "SUCCESS_STEPS"]
+
+#: flags that must be positive, and flags that must not be negative
+_POSITIVE = ("cost_width", "start_var", "random_action", "max_action")
+_NON_NEGATIVE = ("fine_cost_width", "limit_cost", "limit_cost_weight", "threshold",
+                 "start_noise", "constant_input_lengthscale")
 
 #: Paper figures of the reacher (its own machine, with a GPU).
 PAPER_SECONDS = {"interaction": 21.22, "model": 37.53, "policy": 1380.95, "total": 1598.0}
@@ -73,6 +77,12 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
     g.add_argument("--fine-cost-width", type=float, default=None if damaged else 0.05,
                    help="add a second, narrow saturating cost of this width [m] (more "
                         "precision near the target; 0: none)")
+    g.add_argument("--limit-cost", type=float, default=0.0, metavar="WIDTH",
+                   help="penalise predicted joint angles near their limits: a saturating "
+                        "bump of this width [rad] at each limit of the limited joints "
+                        "(0: none)")
+    g.add_argument("--limit-cost-weight", type=float, default=0.5,
+                   help="weight of each joint-limit bump against the position cost")
     g.add_argument("--planning-horizon", type=int, default=None,
                    help="steps the policy is optimised over (default: --horizon)")
     g.add_argument("--start-var", type=float, default=1e-4,
@@ -105,6 +115,20 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                    metavar=("W", "H"), help="frame size of the rendered final episode")
     add_preset_argument(parser, presets)
     return parser
+
+
+def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Refuse (``parser.error``: exit status 2 with the flag named) widths, variances and
+    distances that are negative, zero where that means nothing, or not finite."""
+    for names, ok, what in ((_POSITIVE, lambda v: v > 0, "positive"),
+                            (_NON_NEGATIVE, lambda v: v >= 0, "zero or positive")):
+        for name in names:
+            value = getattr(args, name, None)
+            if value is not None and not (np.isfinite(value) and ok(value)):
+                parser.error(f"--{name.replace('_', '-')} must be {what} and finite, "
+                             f"got {value}")
+    if args.planning_horizon is not None and args.planning_horizon < 1:
+        parser.error(f"--planning-horizon must be at least 1, got {args.planning_horizon}")
 
 
 def env_kwargs(args: argparse.Namespace, damaged: bool) -> Dict[str, Any]:
@@ -150,9 +174,11 @@ def ignore_constant_inputs(agent, lengthscale: float = 100.0) -> None:
         model.kernel.lengthscales.assign(ell)
 
 
-def agent_builder(args: argparse.Namespace, target: np.ndarray):
+def agent_builder(args: argparse.Namespace, target: np.ndarray,
+                  joint_limits: Optional[np.ndarray] = None):
     """``(data, start_states) -> PILCO`` for the reacher; ``target [3]`` is the gripper
-    target, the reward looks at state dims 0..2 (x, y, z)."""
+    target, the reward looks at state dims 0..2 (x, y, z); with ``--limit-cost`` also at
+    the joint angles (dims 3..9) near ``joint_limits [7, 2]`` (±inf: unlimited)."""
     from ..controllers import RbfController, squash_sin
     from ..models import PILCO
     from ..rewards import CombinedRewards, ExponentialReward
@@ -172,12 +198,38 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray):
         reward = position_reward(D, args.cost_width)
         if args.fine_cost_width:
             reward = CombinedRewards(D, [reward, position_reward(D, args.fine_cost_width)])
+        if getattr(args, "limit_cost", 0.0) and joint_limits is not None:
+            bumps = limit_bumps(D, joint_limits, args.limit_cost)
+            reward = CombinedRewards(D, [reward, *bumps],
+                                     [1.0] + [-args.limit_cost_weight] * len(bumps))
         agent = PILCO(data, controller, reward, horizon=args.planning_horizon or args.horizon,
                       m_init=start_states[0:1], S_init=args.start_var * np.eye(D))
         after_model_fit(args)(agent)
         return agent
 
     return build
+
+
+def limit_bumps(state_dim: int, joint_limits: np.ndarray, width: float) -> List[Any]:
+    """One :class:`~pilco.rewards.ExponentialReward` per finite joint limit: a bump of
+    ``width`` [rad] centred on the limit of joint ``j`` (state dim ``3 + j``), highest
+    (1) at the limit. Subtracted from the reward, they keep the predicted joint angles
+    away from the limits, where the real joint stops but the GP model, which rarely
+    sees a joint at its limit, predicts it moving on."""
+    from ..rewards import ExponentialReward
+
+    limits = np.asarray(joint_limits, dtype=np.float64)
+    bumps = []
+    for j, bounds in enumerate(limits):
+        for value in bounds:
+            if not np.isfinite(value):
+                continue
+            W = np.zeros((state_dim, state_dim))
+            W[3 + j, 3 + j] = 1.0 / width ** 2
+            t = np.zeros((1, state_dim))
+            t[0, 3 + j] = value
+            bumps.append(ExponentialReward(state_dim, W, t))
+    return bumps
 
 
 def after_model_fit(args: argparse.Namespace):
@@ -218,13 +270,10 @@ def make_experiment(args: argparse.Namespace, task: str = "reacher",
         return plotting.replay_fetch_frames(episode.states[:, 3:10], target,
                                             *args.render_size)
 
-    kw = dict(make_env=lambda: env, args=vars(args), render_fn=render,
-              after_model_fit=after_model_fit(args),
-              success_fn=success_fn or reached_within(SUCCESS_STEPS))
-    build = agent_builder(args, target)
-    if args.resume:
-        return Experiment.resume(args.output, config, build, **kw)
-    return Experiment(config, args.output, build, **kw)
+    build = agent_builder(args, target, env.unwrapped.joint_limits)
+    return open_experiment(args, config, build, make_env=lambda: env,
+                           render_fn=render, after_model_fit=after_model_fit(args),
+                           success_fn=success_fn or reached_within(SUCCESS_STEPS))
 
 
 def figures(exp: Experiment, title: str) -> List[str]:
@@ -240,8 +289,9 @@ def figures(exp: Experiment, title: str) -> List[str]:
 def parse_args(argv: Optional[Sequence[str]] = None,
                damaged: bool = False) -> argparse.Namespace:
     """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    args = parse_args_with_resume(build_parser(damaged), argv)
-    configure_logging(args.log_level)
+    parser = build_parser(damaged)
+    args = parse_task_args(parser, argv)
+    check_args(parser, args)
     return args
 
 

@@ -1,0 +1,69 @@
+"""The reacher task's own pieces: the joint-limit cost and the checks of its flags."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pilco.rewards import CombinedRewards, ExponentialReward
+from pilco.tasks import reacher
+
+# the Fetch arm's limits (pilco/envs/fetch_model.py); rolls are unlimited
+LIMITS = np.array([[-1.6056, 1.6056], [-1.221, 1.518], [-np.inf, np.inf], [-2.251, 2.251],
+                   [-np.inf, np.inf], [-2.16, 2.16], [-np.inf, np.inf]])
+
+
+def test_one_bump_per_finite_limit_on_its_joint():
+    bumps = reacher.limit_bumps(10, LIMITS, 0.1)
+    assert len(bumps) == 8
+    centres = sorted((int(np.argmax(np.diag(b.W.numpy()))), float(b.t.numpy()[0, np.argmax(
+        np.diag(b.W.numpy()))])) for b in bumps)
+    expected = sorted((3 + j, v) for j in (0, 1, 3, 5) for v in LIMITS[j])
+    assert [c[0] for c in centres] == [e[0] for e in expected]
+    np.testing.assert_allclose([c[1] for c in centres], [e[1] for e in expected])
+    for b in bumps:  # each looks at one joint angle only, with width 0.1 rad
+        W = b.W.numpy()
+        assert np.count_nonzero(W) == 1 and W.max() == pytest.approx(100.0)
+
+
+def test_the_bumps_lower_the_reward_near_a_limit_only():
+    D = 10
+    target = np.zeros((1, D))
+    position = ExponentialReward(D, np.diag([1.0] * 3 + [0.0] * 7), target)
+    bumps = reacher.limit_bumps(D, LIMITS, 0.1)
+    reward = CombinedRewards(D, [position, *bumps], [1.0] + [-0.5] * len(bumps))
+    s = 1e-6 * np.eye(D)
+
+    def value(q):
+        m = np.zeros((1, D))
+        m[0, 3:] = q
+        return float(reward.compute_reward(m, s)[0].numpy().squeeze())
+
+    mid = np.zeros(7)
+    near = mid.copy()
+    near[3] = 2.251 - 0.02  # elbow flex 2 cm-rad from its upper limit
+    assert value(mid) == pytest.approx(1.0, abs=1e-5)  # position reward only
+    assert value(near) == pytest.approx(1.0 - 0.5 * np.exp(-0.02 ** 2 / (2 * 0.01)), rel=1e-4)
+    rolled = mid.copy()
+    rolled[2] = 50.0  # unlimited joints carry no bump
+    assert value(rolled) == pytest.approx(1.0, abs=1e-5)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--cost-width", "-1"], "--cost-width must be positive"),
+    (["--cost-width", "inf"], "--cost-width must be positive"),
+    (["--fine-cost-width", "-0.1"], "--fine-cost-width must be zero or positive"),
+    (["--limit-cost", "nan"], "--limit-cost must be zero or positive"),
+    (["--start-var", "0"], "--start-var must be positive"),
+    (["--max-action", "-0.1"], "--max-action must be positive"),
+    (["--planning-horizon", "0"], "--planning-horizon must be at least 1"),
+])
+def test_bad_flags_are_refused_by_name(argv, message, capsys, tmp_path):
+    with pytest.raises(SystemExit) as exc:
+        reacher.parse_args([*argv, "--output", str(tmp_path)])
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_good_flags_pass():
+    args = reacher.parse_args(["--limit-cost", "0.1", "--fine-cost-width", "0"])
+    assert args.limit_cost == 0.1 and args.limit_cost_weight == 0.5
