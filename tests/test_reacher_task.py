@@ -49,19 +49,31 @@ def test_the_bumps_lower_the_reward_near_a_limit_only():
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--cost-width", "-1"], "--cost-width must be positive"),
-    (["--cost-width", "inf"], "--cost-width must be positive"),
-    (["--fine-cost-width", "-0.1"], "--fine-cost-width must be zero or positive"),
-    (["--limit-cost", "nan"], "--limit-cost must be zero or positive"),
-    (["--start-var", "0"], "--start-var must be positive"),
-    (["--max-action", "-0.1"], "--max-action must be positive"),
-    (["--planning-horizon", "0"], "--planning-horizon must be at least 1"),
+    (["--cost-width", "-1"], "--cost-width: must be positive"),
+    (["--cost-width", "inf"], "--cost-width: must be positive"),
+    (["--cost-width", "wide"], "--cost-width: expected a number"),
+    (["--fine-cost-width", "-0.1"], "--fine-cost-width: must be zero or positive"),
+    (["--limit-cost", "nan"], "--limit-cost: must be zero or positive"),
+    (["--start-var", "0"], "--start-var: must be positive"),
+    (["--max-action", "-0.1"], "--max-action: must be positive"),
+    (["--planning-horizon", "0"], "--planning-horizon: must be at least 1"),
+    (["--planning-horizon", "2.5"], "--planning-horizon: expected an integer"),
 ])
 def test_bad_flags_are_refused_by_name(argv, message, capsys, tmp_path):
     with pytest.raises(SystemExit) as exc:
         reacher.parse_args([*argv, "--output", str(tmp_path)])
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_sweep_refuses_bad_task_values_before_ray(tmp_path):
+    from pilco.sweep import cli
+
+    args = cli.build_parser().parse_args(["damaged_reacher", "--seeds", "0-1",
+                                          "--set", "cost_width=-0.4",
+                                          "--output", str(tmp_path)])
+    with pytest.raises(ValueError, match="--cost-width: must be positive"):
+        cli.plan(args, [])
 
 
 def test_good_flags_pass():

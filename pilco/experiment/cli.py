@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
@@ -13,6 +14,7 @@ from .report import format_episode_table, format_timing_table
 
 __all__ = ["add_common_arguments", "add_preset_argument", "learning_settings",
            "parse_args_with_resume", "parse_task_args", "open_experiment",
+           "positive_float", "non_negative_float", "positive_int",
            "configure_logging", "finish"]
 
 
@@ -136,6 +138,27 @@ def parse_args_with_resume(parser: argparse.ArgumentParser,
     else:
         args.output = args.output.format(seed=args.seed)
     return args
+
+
+def _number(kind: type, test: Callable[[float], bool], what: str) -> Callable[[str], Any]:
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            noun = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
+        if not (math.isfinite(value) and test(value)):
+            raise argparse.ArgumentTypeError(f"must be {what} and finite, got {text}")
+        return value
+
+    parse.__name__ = what.replace(" ", "_")
+    return parse
+
+
+#: argparse ``type=`` of flags that must be > 0, >= 0, or an integer >= 1
+positive_float = _number(float, lambda v: v > 0, "positive")
+non_negative_float = _number(float, lambda v: v >= 0, "zero or positive")
+positive_int = _number(int, lambda v: v >= 1, "at least 1")
 
 
 def parse_task_args(parser: argparse.ArgumentParser,

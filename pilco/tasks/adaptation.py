@@ -57,9 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    parser = build_parser()
-    args = parse_task_args(parser, argv)
-    reacher.check_args(parser, args)
+    args = parse_task_args(build_parser(), argv)
     args.episodes = args.random_episodes + args.healthy_episodes + args.damaged_episodes
     return args
 

@@ -36,16 +36,13 @@ import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig, make_env
 from ..experiment.cli import (add_common_arguments, add_preset_argument, finish,
-                              learning_settings, open_experiment, parse_task_args)
+                              learning_settings, non_negative_float, open_experiment,
+                              parse_task_args, positive_float, positive_int)
 
-__all__ = ["build_parser", "check_args", "env_kwargs", "make_config", "agent_builder",
+__all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
            "ignore_constant_inputs", "limit_bumps", "make_experiment", "figures",
            "reached_within", "parse_args", "main", "SUCCESS_STEPS"]
 
-#: flags that must be positive, and flags that must not be negative
-_POSITIVE = ("cost_width", "start_var", "random_action", "max_action")
-_NON_NEGATIVE = ("fine_cost_width", "limit_cost", "limit_cost_weight", "threshold",
-                 "start_noise", "constant_input_lengthscale")
 
 #: Paper figures of the reacher (its own machine, with a GPU).
 PAPER_SECONDS = {"interaction": 21.22, "model": 37.53, "policy": 1380.95, "total": 1598.0}
@@ -72,32 +69,32 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
     presets = {"paper-code": dict(PAPER_CODE, **({"damage_mode": "zero_on_step"}
                                                  if damaged else {}))}
     g = parser.add_argument_group("reacher")
-    g.add_argument("--cost-width", type=float, default=0.4 if damaged else 0.2,
+    g.add_argument("--cost-width", type=positive_float, default=0.4 if damaged else 0.2,
                    help="σ_c [m] of the saturating cost on the gripper-target distance")
-    g.add_argument("--fine-cost-width", type=float, default=None if damaged else 0.05,
+    g.add_argument("--fine-cost-width", type=non_negative_float, default=None if damaged else 0.05,
                    help="add a second, narrow saturating cost of this width [m] (more "
                         "precision near the target; 0: none)")
-    g.add_argument("--limit-cost", type=float, default=0.0, metavar="WIDTH",
+    g.add_argument("--limit-cost", type=non_negative_float, default=0.0, metavar="WIDTH",
                    help="penalise predicted joint angles near their limits: a saturating "
                         "bump of this width [rad] at each limit of the limited joints "
                         "(0: none)")
-    g.add_argument("--limit-cost-weight", type=float, default=0.5,
+    g.add_argument("--limit-cost-weight", type=non_negative_float, default=0.5,
                    help="weight of each joint-limit bump against the position cost")
-    g.add_argument("--planning-horizon", type=int, default=None,
+    g.add_argument("--planning-horizon", type=positive_int, default=None,
                    help="steps the policy is optimised over (default: --horizon)")
-    g.add_argument("--start-var", type=float, default=1e-4,
+    g.add_argument("--start-var", type=positive_float, default=1e-4,
                    help="variance of the initial state distribution (times the identity)")
-    g.add_argument("--random-action", type=float, default=0.05,
+    g.add_argument("--random-action", type=positive_float, default=0.05,
                    help="random episodes: actions uniform in ±this [rad]")
-    g.add_argument("--max-action", type=float, default=0.1,
+    g.add_argument("--max-action", type=positive_float, default=0.1,
                    help="policy and env bound of the per-step joint rotation [rad]")
-    g.add_argument("--threshold", type=float, default=0.05,
+    g.add_argument("--threshold", type=non_negative_float, default=0.05,
                    help="success distance [m]; episodes stop there")
     g.add_argument("--no-early-stop", action="store_true",
                    help="run every episode for the full horizon even at the target")
     g.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                    help="target position [m] (default the env's (1.2, 0.38, 0.38))")
-    g.add_argument("--start-noise", type=float, default=0.0,
+    g.add_argument("--start-noise", type=non_negative_float, default=0.0,
                    help="std [rad] of noise on the start joint angles")
     g.add_argument("--damage-mode", choices=("zero", "zero_on_step", "stuck"), default="zero",
                    help="damaged arm: elbow forced to 0 rad ('zero'; 'zero_on_step': the "
@@ -108,27 +105,13 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                         "of the actions, as the paper's code)")
     g.add_argument("--damaged-joints", nargs="+", default=["elbow_flex"],
                    help="damaged arm: joints that ignore commands")
-    g.add_argument("--constant-input-lengthscale", type=float, default=100.0,
+    g.add_argument("--constant-input-lengthscale", type=non_negative_float, default=100.0,
                    help="lengthscale given to GP inputs that are constant in the data (a "
                         "damaged joint) after every model fit; 0: leave them to training")
     g.add_argument("--render-size", type=int, nargs=2, default=[320, 240],
                    metavar=("W", "H"), help="frame size of the rendered final episode")
     add_preset_argument(parser, presets)
     return parser
-
-
-def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """Refuse (``parser.error``: exit status 2 with the flag named) widths, variances and
-    distances that are negative, zero where that means nothing, or not finite."""
-    for names, ok, what in ((_POSITIVE, lambda v: v > 0, "positive"),
-                            (_NON_NEGATIVE, lambda v: v >= 0, "zero or positive")):
-        for name in names:
-            value = getattr(args, name, None)
-            if value is not None and not (np.isfinite(value) and ok(value)):
-                parser.error(f"--{name.replace('_', '-')} must be {what} and finite, "
-                             f"got {value}")
-    if args.planning_horizon is not None and args.planning_horizon < 1:
-        parser.error(f"--planning-horizon must be at least 1, got {args.planning_horizon}")
 
 
 def env_kwargs(args: argparse.Namespace, damaged: bool) -> Dict[str, Any]:
@@ -289,10 +272,7 @@ def figures(exp: Experiment, title: str) -> List[str]:
 def parse_args(argv: Optional[Sequence[str]] = None,
                damaged: bool = False) -> argparse.Namespace:
     """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    parser = build_parser(damaged)
-    args = parse_task_args(parser, argv)
-    check_args(parser, args)
-    return args
+    return parse_task_args(build_parser(damaged), argv)
 
 
 def main(argv: Optional[Sequence[str]] = None, damaged: bool = False) -> int:
