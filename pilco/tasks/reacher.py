@@ -19,6 +19,10 @@ Settings the paper leaves open (chosen here, every one a flag):
   ``--fine-cost-width`` 0.05 m (healthy arm; damaged: none) adds a narrow second cost
   (``CombinedRewards``): the reacher's failures were mostly close misses and stalls, and
   with it seeds 0-19 succeed 14/20 instead of 11/20 (README, "Success rates").
+- ``--limit-cost`` 0 (off): with a width [rad], saturating bumps at the joint limits
+  are subtracted from the reward (weight ``--limit-cost-weight`` 0.5 each), so that
+  the policy keeps the predicted joints off their limits, where the real joint stops
+  but the model, which has rarely seen it there, predicts it moving on.
 - ``--start-var`` 1e-4: the initial state distribution is N(start observation, 1e-4·I).
 - ``--policy-iters`` 25 and ``--model-iters`` 100 L-BFGS iterations, 1 restart each.
 - GP-input columns that are constant in the data (a damaged joint) get a long lengthscale
