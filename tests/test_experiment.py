@@ -291,6 +291,8 @@ def test_the_reacher_paper_code_preset():
     assert args.cost_width == 0.5  # a flag given wins over the preset
     kw = reacher.env_kwargs(args, damaged=True)
     assert kw["joint_state"] == "commanded" and kw["damage_mode"] == "zero_on_step"
+    paper = reacher.parse_args(["--preset", "paper-code"])  # one cost, as the paper's code
+    assert (paper.cost_width, paper.fine_cost_width, paper.limit_cost) == (1.0, 0.0, 0.0)
     healthy = reacher.parse_args([])
     assert healthy.preset is None and reacher.env_kwargs(healthy, False)["joint_state"] == "measured"
 

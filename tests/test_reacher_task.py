@@ -79,3 +79,23 @@ def test_a_sweep_refuses_bad_task_values_before_ray(tmp_path):
 def test_good_flags_pass():
     args = reacher.parse_args(["--limit-cost", "0.1", "--fine-cost-width", "0"])
     assert args.limit_cost == 0.1 and args.limit_cost_weight == 0.5
+
+
+def test_the_default_agent_has_the_limit_bumps_and_the_paper_preset_not():
+    rng = np.random.default_rng(0)
+    X, Y = rng.normal(size=(12, 17)), 0.01 * rng.normal(size=(12, 10))
+    start = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
+    target = np.array([1.2, 0.38, 0.38])
+
+    def reward_terms(argv):
+        args = reacher.parse_args([*argv, "--basis-functions", "3"])
+        agent = reacher.agent_builder(args, target, LIMITS)((X, Y), start)
+        r = agent.reward
+        return [type(t).__name__ for t in getattr(r, "base_rewards", [r])], r
+
+    names, reward = reward_terms([])
+    # the position cost (coarse + fine) and one bump per finite limit, subtracted
+    assert names == ["CombinedRewards"] + ["ExponentialReward"] * 8
+    np.testing.assert_allclose(reward.coefs.numpy(), [1.0] + [-0.5] * 8)
+    assert reward_terms(["--limit-cost", "0"])[0] == ["ExponentialReward"] * 2
+    assert reward_terms(["--preset", "paper-code"])[0] == ["ExponentialReward"]
