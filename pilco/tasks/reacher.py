@@ -78,7 +78,8 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
     g = parser.add_argument_group("reacher")
     g.add_argument("--cost-width", type=positive_float, default=0.4 if damaged else 0.2,
                    help="σ_c [m] of the saturating cost on the gripper-target distance")
-    g.add_argument("--fine-cost-width", type=non_negative_float, default=None if damaged else 0.05,
+    g.add_argument("--fine-cost-width", type=non_negative_float,
+                   default=None if damaged else 0.05,
                    help="add a second, narrow saturating cost of this width [m] (more "
                         "precision near the target; 0: none)")
     g.add_argument("--limit-cost", type=non_negative_float, default=0.1, metavar="WIDTH",
