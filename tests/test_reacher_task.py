@@ -99,3 +99,11 @@ def test_the_default_agent_has_the_limit_bumps_and_the_paper_preset_not():
     np.testing.assert_allclose(reward.coefs.numpy(), [1.0] + [-0.5] * 8)
     assert reward_terms(["--limit-cost", "0"])[0] == ["ExponentialReward"] * 2
     assert reward_terms(["--preset", "paper-code"])[0] == ["ExponentialReward"]
+
+
+def test_the_adaptation_keeps_the_earlier_single_cost():
+    from pilco.tasks import adaptation
+
+    args = adaptation.parse_args([])
+    assert args.fine_cost_width is None and args.limit_cost == 0.0
+    assert adaptation.parse_args(["--limit-cost", "0.1"]).limit_cost == 0.1
