@@ -34,12 +34,13 @@ import argparse
 import json
 import os
 import platform
-import resource
 import subprocess
 import sys
 import time
 
 import numpy as np
+
+from port_policy import peak_memory_mb  # same directory; standard library only
 
 
 def build(problem: str, seed: int = 0, cartpole_data: int = 40):
@@ -148,18 +149,6 @@ def time_baseline(problem: str, repeats: int, cartpole_data: int):
             "baseline_optimize_maxiter10_seconds": time.perf_counter() - t0}
 
 
-def _peak_memory_mb() -> float:
-    """Peak resident memory of this process. Linux's VmHWM belongs to this program alone;
-    ``ru_maxrss`` (the fallback) also counts the parent's memory at ``fork``."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return float(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
 
 def optimize_fresh(problem: str, cartpole_data: int):
     """optimize_policy(maxiter=10) in this (fresh) process; run via a subprocess."""
@@ -167,7 +156,7 @@ def optimize_fresh(problem: str, cartpole_data: int):
     t0 = time.perf_counter()
     agent.optimize_policy(maxiter=10)
     secs = time.perf_counter() - t0
-    peak_mb = _peak_memory_mb()
+    peak_mb = peak_memory_mb()
     return {"optimize_policy_maxiter10_seconds": secs, "peak_memory_mb": peak_mb}
 
 
