@@ -52,7 +52,8 @@ def _gp_moments(m, s, X, Y, ell, sf2, sn2, deterministic):
     # covariance on all E x E pairs, tiled
     iL2 = 1.0 / tf.square(ell)  # [E, D]
     P = iL2[:, None, :] + iL2[None, :, :]  # [E, E, D]
-    R = tf.matmul(tf.tile(s[None, None], [E, E, 1, 1]), tf.linalg.diag(P)) + tf.eye(D, dtype=X.dtype)
+    R = (tf.matmul(tf.tile(s[None, None], [E, E, 1, 1]), tf.linalg.diag(P))
+         + tf.eye(D, dtype=X.dtype))
     detR = tf.linalg.det(R)
     ii = inp * iL2[:, None, :]  # (x - m) / l^2, [E, n, D]
     Rs = 0.5 * tf.linalg.solve(R, tf.tile(s[None, None], [E, E, 1, 1]))  # R^-1 s / 2

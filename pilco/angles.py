@@ -61,7 +61,8 @@ def trig_moments(m, s, indices: Sequence[int], scale=None):
     S = 0.5 * S * E2[:, None] * E2[None, :]
     M = tf.reshape(tf.stack([msin, mcos], axis=-1), [1, 2 * I])
     # C: rows idx; column 2k is d/dm sin = cos part, 2k+1 is -sin part
-    Cblock = tf.reshape(tf.stack([tf.linalg.diag(mcos), tf.linalg.diag(-msin)], axis=-1), [I, 2 * I])
+    Cblock = tf.reshape(tf.stack([tf.linalg.diag(mcos), tf.linalg.diag(-msin)], axis=-1),
+                        [I, 2 * I])
     C = tf.scatter_nd(idx[:, None], Cblock, [D, 2 * I])
     return M, S, C
 
@@ -71,7 +72,8 @@ def augment_state(m, s, angle_indices: Sequence[int]):
 
     The non-angle dimensions are kept in order and each angle is replaced by its
     (sin, cos) pair appended after them (the layout of :mod:`pilco.features`, whose
-    :func:`~pilco.features.angle_features` is the mean of these features at a known state). Shapes: m [1, D], s [D, D] ->
+    :func:`~pilco.features.angle_features` is the mean of these features at a known
+    state). Shapes: m [1, D], s [D, D] ->
     Mf [1, F], Sf [F, F], Cf [D, F] with F = D + len(angle_indices) and
     ``Cf = inv(s) Cov[x, features]``.
     """

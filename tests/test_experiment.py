@@ -294,7 +294,8 @@ def test_the_reacher_paper_code_preset():
     paper = reacher.parse_args(["--preset", "paper-code"])  # one cost, as the paper's code
     assert (paper.cost_width, paper.fine_cost_width, paper.limit_cost) == (1.0, 0.0, 0.0)
     healthy = reacher.parse_args([])
-    assert healthy.preset is None and reacher.env_kwargs(healthy, False)["joint_state"] == "measured"
+    assert healthy.preset is None
+    assert reacher.env_kwargs(healthy, False)["joint_state"] == "measured"
 
 
 def test_success_when_the_last_episode_holds_the_target():

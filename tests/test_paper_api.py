@@ -12,7 +12,6 @@ import os
 import subprocess
 import sys
 
-import gpflow
 import numpy as np
 import pytest
 from gpflow import set_trainable

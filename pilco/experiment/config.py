@@ -24,7 +24,8 @@ class ExperimentConfig:
             only (``None`` or 0: all of them).
         model_iters, model_restarts: L-BFGS iterations / restarts of GP training.
         model_min_rel_improvement, model_patience: stop GP training once its loss fell by less
-            than ``model_min_rel_improvement`` (relative) over the last ``model_patience`` iterations
+            than ``model_min_rel_improvement`` (relative) over the last ``model_patience``
+            iterations
             (``None``: always ``model_iters``).
         policy_iters, policy_restarts: the same for the policy.
         policy_method: ``"L-BFGS-B"`` or ``"BFGS"`` (see ``PILCO.optimize_policy``).

@@ -199,7 +199,8 @@ class MGPR(gpflow.base.Module):
         power = 30.0
         X = tf.convert_to_tensor(self._X)
         n = tf.cast(tf.shape(X)[0], X.dtype)
-        std = tf.sqrt(tf.reduce_sum(tf.square(X - tf.reduce_mean(X, 0)), 0) / tf.maximum(n - 1.0, 1.0))
+        centred = X - tf.reduce_mean(X, 0)
+        std = tf.sqrt(tf.reduce_sum(tf.square(centred), 0) / tf.maximum(n - 1.0, 1.0))
         # constant inputs leave the evidence flat in their lengthscale: bound it around 1
         # instead of pulling it towards a zero spread (which would make it ~1e-6)
         std = tf.where(std > 1e-8, std, tf.ones_like(std))

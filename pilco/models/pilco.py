@@ -144,7 +144,8 @@ class PILCO(gpflow.base.Module):
 
     @S_init.setter
     def S_init(self, value):
-        self._rollout.S_init.assign(check_covariance(value, self.state_dim, "initial state covariance"))
+        self._rollout.S_init.assign(
+            check_covariance(value, self.state_dim, "initial state covariance"))
 
     @property
     def mgpr(self) -> MGPR:

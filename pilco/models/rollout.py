@@ -11,9 +11,9 @@ One step (MATLAB PILCO's ``propagate``) maps the state distribution ``x_t ~ N(m,
 4. ``x_{t+1} = x_t + Δ`` with every cross-covariance kept.
 
 The whole horizon is one ``tf.while_loop`` inside a compiled function, traced once; the
-dynamics GP's factorisation (Cholesky, ``beta`` and ``K^-1``) does not depend on the policy: :meth:`Rollout.refresh` computes it
-once per policy optimisation and stores it in non-trainable variables that the compiled
-functions read.
+dynamics GP's factorisation (Cholesky, ``beta`` and ``K^-1``) does not depend on the
+policy: :meth:`Rollout.refresh` computes it once per policy optimisation and stores it
+in non-trainable variables that the compiled functions read.
 """
 from __future__ import annotations
 
