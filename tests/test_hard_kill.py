@@ -304,6 +304,12 @@ def test_a_failed_write_never_makes_progress_count_missing_data(
         except OSError:
             assert name != "agent.npz", fail_at  # a failed agent write is only logged
         monkeypatch.setattr(files, "atomic_write", failing.real)
+        if name == "agent.npz":
+            # progress tells whether agent.npz is the newest agent: not after its last
+            # write failed (the older file stays), again after a later write succeeded
+            last_agent_write = max(i for i, (n, _) in enumerate(writes) if n == "agent.npz")
+            progress = json.loads((directory / "progress.json").read_text())
+            assert progress["agent_saved"] is (fail_at != last_agent_write), fail_at
         counted, in_data = on_disk(directory)
         # the session's last progress write, after the failure, counts only saved data
         assert counted is not None and counted <= in_data, (fail_at, name)

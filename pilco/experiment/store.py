@@ -50,6 +50,9 @@ class RunStore:
         #: episodes in ``data.npz`` as last written or read by this store: what
         #: ``progress.json`` may count (a failed data write leaves the old file)
         self.saved_episodes = 0
+        #: whether ``agent.npz`` holds the agent of the newest save: False after a failed
+        #: agent write, which leaves an older agent file (or none) behind
+        self.agent_current = os.path.exists(self.agent_path)
 
     def path(self, name: str) -> str:
         """Absolute path of ``name`` inside the run directory."""
@@ -84,10 +87,12 @@ class RunStore:
         """``agent.save(agent.npz)``; a failure is logged (the data are already safe)."""
         try:
             agent.save(self.agent_path)
-            return True
         except Exception as err:  # noqa: BLE001 - keep running; data are on disk
             logger.warning("could not save the agent to %s: %s", self.agent_path, err)
+            self.agent_current = False
             return False
+        self.agent_current = True
+        return True
 
     def save_progress(self, progress: Dict[str, Any], summary: Dict[str, Any]) -> None:
         """Write ``progress.json``, then ``summary.json``."""
@@ -160,7 +165,8 @@ def progress_record(exp) -> Dict[str, Any]:
         "summary_fields": exp.summary_fields,
         "interrupted": exp.interrupted,
         "complete": exp.complete,
-        "agent_saved": os.path.exists(exp.store.agent_path),
+        # False after a failed agent write: agent.npz (if any) is then older than the data
+        "agent_saved": exp.store.agent_current and os.path.exists(exp.store.agent_path),
     }
 
 
