@@ -14,7 +14,7 @@ from .report import format_episode_table, format_timing_table
 
 __all__ = ["add_common_arguments", "add_preset_argument", "learning_settings",
            "parse_args_with_resume", "parse_task_args", "open_experiment",
-           "positive_float", "non_negative_float", "positive_int",
+           "positive_float", "non_negative_float", "positive_int", "non_negative_int",
            "configure_logging", "finish"]
 
 
@@ -29,12 +29,13 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
                          output: str = "runs/run-seed{seed}") -> None:
     """Flags shared by the tasks (defaults given per task)."""
     g = parser.add_argument_group("experiment")
-    for name, default, text in (
-            ("--seed", 0, "random seed"),
-            ("--episodes", episodes, "total episodes including the random ones"),
-            ("--random-episodes", random_episodes, "episodes with random actions first"),
-            ("--horizon", steps, "steps per episode and planning horizon")):
-        g.add_argument(name, type=int, default=default, help=f"{text} (default %(default)s)")
+    for name, kind, default, text in (
+            ("--seed", non_negative_int, 0, "random seed"),
+            ("--episodes", positive_int, episodes, "total episodes including the random ones"),
+            ("--random-episodes", non_negative_int, random_episodes,
+             "episodes with random actions first"),
+            ("--horizon", positive_int, steps, "steps per episode and planning horizon")):
+        g.add_argument(name, type=kind, default=default, help=f"{text} (default %(default)s)")
     g.add_argument("--output", default=output,
                    help="run directory (default %(default)s; {seed} is replaced)")
     g.add_argument("--resume", metavar="DIR", default=None,
@@ -45,18 +46,20 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
         g.add_argument(name, action="store_true", help=text)
     g.add_argument("--log-level", default="WARNING", help="logging level (default %(default)s)")
     g = parser.add_argument_group("learning")
-    for name, default, text in (
-            ("--basis-functions", basis_functions, "RBF policy basis functions"),
-            ("--policy-iters", policy_iters, "optimiser iterations per policy optimisation"),
-            ("--policy-restarts", policy_restarts, "policy optimisation restarts"),
-            ("--policy-patience", 10, "iterations for --policy-min-rel-improvement"),
-            ("--policy-iters-first", None, "iterations of the first policy optimisation "
-                                           "(None: --policy-iters)"),
-            ("--model-iters", model_iters, "L-BFGS iterations of GP training"),
-            ("--model-restarts", model_restarts, "GP training restarts"),
-            ("--max-data", max_data,
+    for name, kind, default, text in (
+            ("--basis-functions", positive_int, basis_functions, "RBF policy basis functions"),
+            ("--policy-iters", positive_int, policy_iters,
+             "optimiser iterations per policy optimisation"),
+            ("--policy-restarts", positive_int, policy_restarts, "policy optimisation restarts"),
+            ("--policy-patience", positive_int, 10,
+             "iterations for --policy-min-rel-improvement"),
+            ("--policy-iters-first", positive_int, None,
+             "iterations of the first policy optimisation (None: --policy-iters)"),
+            ("--model-iters", positive_int, model_iters, "L-BFGS iterations of GP training"),
+            ("--model-restarts", positive_int, model_restarts, "GP training restarts"),
+            ("--max-data", non_negative_int, max_data,
              "GP learns from the first N transitions only (0 or None: all)")):
-        g.add_argument(name, type=int, default=default, help=f"{text} (default %(default)s)")
+        g.add_argument(name, type=kind, default=default, help=f"{text} (default %(default)s)")
     g.add_argument("--policy-optimizer", choices=("L-BFGS-B", "BFGS"), type=str.upper,
                    default=policy_method,
                    help="policy optimiser (BFGS: dense update, as the MATLAB release; "
@@ -155,10 +158,11 @@ def _number(kind: type, test: Callable[[float], bool], what: str) -> Callable[[s
     return parse
 
 
-#: argparse ``type=`` of flags that must be > 0, >= 0, or an integer >= 1
+#: argparse ``type=`` of flags that must be > 0, >= 0, an integer >= 1 or >= 0
 positive_float = _number(float, lambda v: v > 0, "positive")
 non_negative_float = _number(float, lambda v: v >= 0, "zero or positive")
 positive_int = _number(int, lambda v: v >= 1, "at least 1")
+non_negative_int = _number(int, lambda v: v >= 0, "at least 0")
 
 
 def parse_task_args(parser: argparse.ArgumentParser,

@@ -21,7 +21,7 @@ import os
 from typing import Any, Dict, List, Optional, Sequence
 
 from ..experiment import Experiment
-from ..experiment.cli import finish, parse_task_args
+from ..experiment.cli import finish, non_negative_int, parse_task_args, positive_int
 from . import reacher
 
 __all__ = ["build_parser", "parse_args", "make_experiment", "damage", "run", "figures",
@@ -44,10 +44,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.set_defaults(output="runs/adaptation-seed{seed}", episodes=None,
                         damage_mode="stuck")
     g = parser.add_argument_group("adaptation")
-    for name, text in (("--healthy-episodes", "at most this many learned episodes before "
-                                               "the damage"),
-                       ("--damaged-episodes", "at most this many learned episodes after it")):
-        g.add_argument(name, type=int, default=4, help=text)
+    g.add_argument("--healthy-episodes", type=non_negative_int, default=4,
+                   help="at most this many learned episodes before the damage")
+    g.add_argument("--damaged-episodes", type=positive_int, default=4,
+                   help="at most this many learned episodes after it")
     for name, text in (("--drop-old-data", "after the damage, learn the model from damaged "
                                            "episodes only"),
                        ("--no-stop-when-recovered", "run all --damaged-episodes even after "

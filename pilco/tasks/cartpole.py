@@ -28,7 +28,8 @@ import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
 from ..experiment.cli import (add_common_arguments, finish, learning_settings,
-                              open_experiment, parse_task_args)
+                              non_negative_float, open_experiment, parse_task_args,
+                              positive_float, positive_int)
 
 __all__ = ["build_parser", "init_policy_from_start", "agent_builder", "make_config",
            "make_experiment", "figures", "main"]
@@ -46,14 +47,16 @@ def build_parser() -> argparse.ArgumentParser:
                          policy_method="BFGS", policy_min_rel_improvement=0.003,
                          model_min_rel_improvement=5e-4)
     g = parser.add_argument_group("cart-pole")
-    g.add_argument("--max-force", type=float, default=10.0, help="force bound [N]")
-    g.add_argument("--cost-width", type=float, default=0.25,
+    g.add_argument("--max-force", type=positive_float, default=10.0, help="force bound [N]")
+    g.add_argument("--cost-width", type=positive_float, default=0.25,
                    help="width [m] of the saturating cost on the tip distance")
-    g.add_argument("--start-std", type=float, default=0.1, help="std of the start state")
-    g.add_argument("--noise-std", type=float, default=0.01, help="measurement noise std")
-    g.add_argument("--threshold", type=float, default=0.1,
+    g.add_argument("--start-std", type=non_negative_float, default=0.1,
+                   help="std of the start state")
+    g.add_argument("--noise-std", type=non_negative_float, default=0.01,
+                   help="measurement noise std")
+    g.add_argument("--threshold", type=positive_float, default=0.1,
                    help="solved: tip within this distance [m] ...")
-    g.add_argument("--hold-steps", type=int, default=10, help="... for the last N steps")
+    g.add_argument("--hold-steps", type=positive_int, default=10, help="... for the last N steps")
     g.add_argument("--squash", choices=("sat", "sin"), default="sat",
                    help="policy squashing function")
     g.add_argument("--policy-input-noise", choices=("on", "off"), default="off",

@@ -25,7 +25,8 @@ import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
 from ..experiment.cli import (add_common_arguments, finish, learning_settings,
-                              open_experiment, parse_task_args)
+                              non_negative_float, open_experiment, parse_task_args,
+                              positive_float, positive_int)
 from ..experiment.scoring import solved_in_last_episode
 
 __all__ = ["TARGET", "WEIGHTS", "M_INIT", "S_INIT", "build_parser", "agent_builder",
@@ -48,15 +49,16 @@ def build_parser() -> argparse.ArgumentParser:
                          policy_restarts=2, model_restarts=2,
                          output="runs/pendulum-seed{seed}")
     g = parser.add_argument_group("pendulum")
-    g.add_argument("--max-action", type=float, default=2.0, help="torque bound [N m]")
-    g.add_argument("--substeps", type=int, default=3,
+    g.add_argument("--max-action", type=positive_float, default=2.0, help="torque bound [N m]")
+    g.add_argument("--substeps", type=positive_int, default=3,
                    help="Pendulum-v1 steps (0.05 s) each action is held for")
-    g.add_argument("--start-std", type=float, default=0.05,
+    g.add_argument("--start-std", type=non_negative_float, default=0.05,
                    help="std of θ - π and θ̇ at the start (hanging down)")
-    g.add_argument("--noise-variance", type=float, default=1e-3,
+    g.add_argument("--noise-variance", type=non_negative_float, default=1e-3,
                    help="the GPs' noise variance, fixed (0: learned)")
-    g.add_argument("--threshold", type=float, default=0.3, help="up: |θ| below this [rad] ...")
-    g.add_argument("--hold-steps", type=int, default=10, help="... for the last N steps")
+    g.add_argument("--threshold", type=positive_float, default=0.3,
+                   help="up: |θ| below this [rad] ...")
+    g.add_argument("--hold-steps", type=positive_int, default=10, help="... for the last N steps")
     return parser
 
 

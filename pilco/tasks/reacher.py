@@ -117,7 +117,7 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
     g.add_argument("--constant-input-lengthscale", type=non_negative_float, default=100.0,
                    help="lengthscale given to GP inputs that are constant in the data (a "
                         "damaged joint) after every model fit; 0: leave them to training")
-    g.add_argument("--render-size", type=int, nargs=2, default=[320, 240],
+    g.add_argument("--render-size", type=positive_int, nargs=2, default=[320, 240],
                    metavar=("W", "H"), help="frame size of the rendered final episode")
     add_preset_argument(parser, presets)
     return parser

@@ -1,0 +1,67 @@
+"""Every task refuses a bad numeric flag by name, as an argparse error (exit status 2),
+before any environment, model or TensorFlow work starts."""
+import pytest
+
+from pilco.tasks import adaptation, cartpole, pendulum, reacher
+
+PARSERS = {
+    "cartpole": cartpole.parse_args,
+    "pendulum": pendulum.parse_args,
+    "reacher": reacher.parse_args,
+    "damaged_reacher": lambda argv: reacher.parse_args(argv, damaged=True),
+    "adaptation": adaptation.parse_args,
+}
+
+# flags every task has (experiment/cli.py's add_common_arguments)
+COMMON = [
+    (["--seed", "-1"], "--seed: must be at least 0"),
+    (["--episodes", "0"], "--episodes: must be at least 1"),
+    (["--horizon", "ten"], "--horizon: expected an integer"),
+    (["--random-episodes", "-2"], "--random-episodes: must be at least 0"),
+    (["--basis-functions", "0"], "--basis-functions: must be at least 1"),
+    (["--policy-iters", "-5"], "--policy-iters: must be at least 1"),
+    (["--policy-iters-first", "0"], "--policy-iters-first: must be at least 1"),
+    (["--policy-restarts", "0"], "--policy-restarts: must be at least 1"),
+    (["--policy-patience", "0"], "--policy-patience: must be at least 1"),
+    (["--model-iters", "1.5"], "--model-iters: expected an integer"),
+    (["--model-restarts", "0"], "--model-restarts: must be at least 1"),
+    (["--max-data", "-100"], "--max-data: must be at least 0"),
+]
+
+# flags of one task
+OWN = [
+    ("cartpole", ["--cost-width", "0"], "--cost-width: must be positive"),
+    ("cartpole", ["--noise-std", "-0.01"], "--noise-std: must be zero or positive"),
+    ("cartpole", ["--hold-steps", "0"], "--hold-steps: must be at least 1"),
+    ("pendulum", ["--substeps", "0"], "--substeps: must be at least 1"),
+    ("pendulum", ["--max-action", "nan"], "--max-action: must be positive"),
+    ("reacher", ["--render-size", "320", "-1"], "--render-size: must be at least 1"),
+    ("adaptation", ["--damaged-episodes", "0"], "--damaged-episodes: must be at least 1"),
+    ("adaptation", ["--healthy-episodes", "-1"], "--healthy-episodes: must be at least 0"),
+]
+
+
+def refused(task, argv, capsys, tmp_path):
+    with pytest.raises(SystemExit) as stop:
+        PARSERS[task]([*argv, "--output", str(tmp_path)])
+    assert stop.value.code == 2
+    return capsys.readouterr().err
+
+
+@pytest.mark.parametrize("task", sorted(PARSERS))
+@pytest.mark.parametrize("argv, message", COMMON)
+def test_common_flags_refuse_bad_values(task, argv, message, capsys, tmp_path):
+    assert message in refused(task, argv, capsys, tmp_path)
+
+
+@pytest.mark.parametrize("task, argv, message", OWN)
+def test_task_flags_refuse_bad_values(task, argv, message, capsys, tmp_path):
+    assert message in refused(task, argv, capsys, tmp_path)
+
+
+@pytest.mark.parametrize("task", sorted(PARSERS))
+def test_edge_values_are_accepted(task, tmp_path):
+    """0 where 0 means something: all data (--max-data 0), no random episode."""
+    args = PARSERS[task](["--max-data", "0", "--random-episodes", "0", "--seed", "0",
+                          "--policy-iters-first", "1", "--output", str(tmp_path)])
+    assert (args.max_data, args.random_episodes, args.policy_iters_first) == (0, 0, 1)
