@@ -107,3 +107,52 @@ def test_the_adaptation_keeps_the_earlier_single_cost():
     args = adaptation.parse_args([])
     assert args.fine_cost_width is None and args.limit_cost == 0.0
     assert adaptation.parse_args(["--limit-cost", "0.1"]).limit_cost == 0.1
+
+
+def priors_of(agent):
+    """``[(lengthscale prior, variance prior)]`` per output GP, as (shape, scale) or None."""
+    def shape_scale(p):
+        return None if p.prior is None else (float(p.prior.concentration.numpy()),
+                                             float(1.0 / p.prior.rate.numpy()))
+    return [(shape_scale(m.kernel.lengthscales), shape_scale(m.kernel.variance))
+            for m in agent.mgpr.models]
+
+
+def test_the_paper_preset_puts_the_paper_codes_priors_on_every_gp():
+    rng = np.random.default_rng(1)
+    X, Y = rng.normal(size=(12, 17)), 0.01 * rng.normal(size=(12, 10))
+    start = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
+    target = np.array([1.2, 0.38, 0.38])
+
+    def agent(argv):
+        args = reacher.parse_args([*argv, "--basis-functions", "3"])
+        return reacher.agent_builder(args, target, LIMITS)((X, Y), start)
+
+    plain, paper = agent([]), agent(["--preset", "paper-code"])
+    assert priors_of(plain) == [(None, None)] * 10
+    assert priors_of(paper) == [((1.0, 10.0), (1.5, 2.0))] * 10
+    assert priors_of(agent(["--preset", "paper-code", "--gp-priors", "none"]))[0] == (None, None)
+    # the priors enter the loss that training minimises: same hyperparameters, the loss
+    # differs by exactly the negative log prior density (a finite, nonzero number)
+    for a, b in zip(plain.mgpr.models, paper.mgpr.models):
+        log_prior = float(b.log_prior_density().numpy())
+        assert np.isfinite(log_prior) and log_prior != 0.0
+        assert float(b.training_loss().numpy()) == pytest.approx(
+            float(a.training_loss().numpy()) - log_prior, rel=1e-12)
+
+
+def test_a_resumed_paper_run_gets_its_priors_back(tmp_path):
+    """agent.npz keeps hyperparameter values only: make_experiment puts the priors back
+    on the agent it reads, before any training."""
+    tiny = ["--preset", "paper-code", "--horizon", "4", "--planning-horizon", "3",
+            "--basis-functions", "2", "--policy-iters", "1", "--policy-iters-first", "1",
+            "--model-iters", "2", "--quiet", "--no-render", "--no-figures",
+            "--output", str(tmp_path)]
+    first = reacher.make_experiment(reacher.parse_args([*tiny, "--episodes", "2"]))
+    first.run()
+    assert priors_of(first.agent)[0] == ((1.0, 10.0), (1.5, 2.0))
+    resumed = reacher.make_experiment(
+        reacher.parse_args([*tiny, "--episodes", "3", "--resume", str(tmp_path)]))
+    x = first.episodes[-1].states[-1]  # read from agent.npz, not rebuilt: the same policy
+    np.testing.assert_allclose(resumed.agent.compute_action(x), first.agent.compute_action(x))
+    assert priors_of(resumed.agent) == [((1.0, 10.0), (1.5, 2.0))] * 10

@@ -47,18 +47,23 @@ from ..experiment.cli import (add_common_arguments, add_preset_argument, finish,
                               parse_task_args, positive_float, positive_int)
 
 __all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
-           "ignore_constant_inputs", "limit_bumps", "make_experiment", "figures",
+           "ignore_constant_inputs", "limit_bumps", "set_gp_priors", "make_experiment", "figures",
            "reached_within", "parse_args", "main", "SUCCESS_STEPS"]
 
 
 #: Paper figures of the reacher (its own machine, with a GPU).
 PAPER_SECONDS = {"interaction": 21.22, "model": 37.53, "policy": 1380.95, "total": 1598.0}
 
-#: The paper's published scripts, as far as this library reproduces them (their GP priors
-#: and the policy's trainable noise variance are not reproduced).
+#: The paper's published scripts, as far as this library reproduces them (the policy's
+#: trainable noise variance is not reproduced).
 PAPER_CODE = dict(planning_horizon=100, start_var=0.1, cost_width=1.0, fine_cost_width=0.0,
                   limit_cost=0.0, policy_iters=30, policy_iters_first=60, max_data=100,
-                  joint_state="commanded")
+                  joint_state="commanded", gp_priors="paper")
+
+#: The paper code's priors on every dynamics GP's hyperparameters (GPflow 1's Gamma(shape,
+#: scale)): lengthscales ~ Gamma(1, 10), signal variance ~ Gamma(1.5, 2); training is then
+#: MAP instead of maximum evidence.
+PAPER_GP_PRIORS = {"lengthscales": (1.0, 10.0), "variance": (1.5, 2.0)}
 
 #: success: the last episode reaches the target within this many steps
 SUCCESS_STEPS = 15
@@ -89,6 +94,9 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                         "(0: none)")
     g.add_argument("--limit-cost-weight", type=non_negative_float, default=0.5,
                    help="weight of each joint-limit bump against the position cost")
+    g.add_argument("--gp-priors", choices=("none", "paper"), default="none",
+                   help="priors on the dynamics GPs' hyperparameters: 'paper' the paper "
+                        "code's Gamma priors on lengthscales and signal variance (MAP)")
     g.add_argument("--planning-horizon", type=positive_int, default=None,
                    help="steps the policy is optimised over (default: --horizon)")
     g.add_argument("--start-var", type=positive_float, default=1e-4,
@@ -196,6 +204,7 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray,
                                      [1.0] + [-args.limit_cost_weight] * len(bumps))
         agent = PILCO(data, controller, reward, horizon=args.planning_horizon or args.horizon,
                       m_init=start_states[0:1], S_init=args.start_var * np.eye(D))
+        set_gp_priors(agent, args)
         after_model_fit(args)(agent)
         return agent
 
@@ -222,6 +231,22 @@ def limit_bumps(state_dim: int, joint_limits: np.ndarray, width: float) -> List[
             t[0, 3 + j] = value
             bumps.append(ExponentialReward(state_dim, W, t))
     return bumps
+
+
+def set_gp_priors(agent, args: argparse.Namespace) -> None:
+    """With ``--gp-priors paper``, put :data:`PAPER_GP_PRIORS` on every output GP of
+    ``agent.mgpr`` (before its first training: the compiled training loss includes the
+    priors it saw when it was traced). Called on new and on resumed agents, since
+    ``agent.npz`` keeps hyperparameter values, not priors."""
+    if getattr(args, "gp_priors", "none") != "paper":
+        return
+    import tensorflow as tf
+    import tensorflow_probability as tfp
+
+    for model in agent.mgpr.models:
+        for name, (shape, scale) in PAPER_GP_PRIORS.items():
+            getattr(model.kernel, name).prior = tfp.distributions.Gamma(
+                tf.constant(shape, tf.float64), tf.constant(1.0 / scale, tf.float64))
 
 
 def after_model_fit(args: argparse.Namespace):
@@ -263,9 +288,12 @@ def make_experiment(args: argparse.Namespace, task: str = "reacher",
                                             *args.render_size)
 
     build = agent_builder(args, target, env.unwrapped.joint_limits)
-    return open_experiment(args, config, build, make_env=lambda: env,
-                           render_fn=render, after_model_fit=after_model_fit(args),
-                           success_fn=success_fn or reached_within(SUCCESS_STEPS))
+    exp = open_experiment(args, config, build, make_env=lambda: env,
+                          render_fn=render, after_model_fit=after_model_fit(args),
+                          success_fn=success_fn or reached_within(SUCCESS_STEPS))
+    if exp.agent is not None:  # resumed from agent.npz, which holds no priors
+        set_gp_priors(exp.agent, args)
+    return exp
 
 
 def figures(exp: Experiment, title: str) -> List[str]:
