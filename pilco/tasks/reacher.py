@@ -30,6 +30,13 @@ Settings the paper leaves open (chosen here, every one a flag):
 - ``--policy-iters`` 25 and ``--model-iters`` 100 L-BFGS iterations, 1 restart each.
 - GP-input columns that are constant in the data (a damaged joint) get a long lengthscale
   after every model fit (:func:`ignore_constant_inputs`).
+- ``--gp-priors none``: maximum evidence; ``paper`` puts the paper code's Gamma priors
+  on the GPs' lengthscales and signal variances (:data:`PAPER_GP_PRIORS`).
+
+``--preset paper-code`` starts from the published scripts' settings
+(:data:`PAPER_CODE`: planning horizon 100, ``S_init = 0.1 I``, one cost of width 1 m,
+30 policy iterations (60 the first time), the first 100 transitions, commanded joint
+angles in the state, the GP priors; the damaged arm straightens on the first step).
 
 Frames of the final episode are rendered by replaying its joint angles in another
 process (MuJoCo's EGL renderer and TensorFlow cannot share a process).
