@@ -81,16 +81,18 @@ def test_good_flags_pass():
     assert args.limit_cost == 0.1 and args.limit_cost_weight == 0.5
 
 
-def test_the_default_agent_has_the_limit_bumps_and_the_paper_preset_not():
+def tiny_agent(argv):
+    """The reacher task's agent for ``argv``, built on 12 random transitions."""
     rng = np.random.default_rng(0)
     X, Y = rng.normal(size=(12, 17)), 0.01 * rng.normal(size=(12, 10))
     start = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
-    target = np.array([1.2, 0.38, 0.38])
+    args = reacher.parse_args([*argv, "--basis-functions", "3"])
+    return reacher.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)((X, Y), start)
 
+
+def test_the_default_agent_has_the_limit_bumps_and_the_paper_preset_not():
     def reward_terms(argv):
-        args = reacher.parse_args([*argv, "--basis-functions", "3"])
-        agent = reacher.agent_builder(args, target, LIMITS)((X, Y), start)
-        r = agent.reward
+        r = tiny_agent(argv).reward
         return [type(t).__name__ for t in getattr(r, "base_rewards", [r])], r
 
     names, reward = reward_terms([])
@@ -119,15 +121,7 @@ def priors_of(agent):
 
 
 def test_the_paper_preset_puts_the_paper_codes_priors_on_every_gp():
-    rng = np.random.default_rng(1)
-    X, Y = rng.normal(size=(12, 17)), 0.01 * rng.normal(size=(12, 10))
-    start = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
-    target = np.array([1.2, 0.38, 0.38])
-
-    def agent(argv):
-        args = reacher.parse_args([*argv, "--basis-functions", "3"])
-        return reacher.agent_builder(args, target, LIMITS)((X, Y), start)
-
+    agent = tiny_agent
     plain, paper = agent([]), agent(["--preset", "paper-code"])
     assert priors_of(plain) == [(None, None)] * 10
     assert priors_of(paper) == [((1.0, 10.0), (1.5, 2.0))] * 10
