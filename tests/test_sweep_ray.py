@@ -27,9 +27,10 @@ def local_ray():
 
 
 COMMAND = ["cartpole", "--seeds", "0-1", "--no-progress", "--max-retries", "0",
-           # max_force=-1 passes the flag check, the task rejects it when it starts
-           "--grid", "max_force=10,-1"]
-OK, BAD = "max_force=10", "max_force=-1"
+           # max_data=1 passes the flag check (an integer >= 0), the task's settings
+           # reject it when it starts (at least 2 transitions, or 0 for all)
+           "--grid", "max_data=0,1"]
+OK, BAD = "max_data=0", "max_data=1"
 
 
 def load(path):
@@ -60,7 +61,7 @@ def test_sweep_runs_every_seed_and_aggregates_their_summaries(sweep):
     assert report["results"][OK]["finished"] == 2
     record = load(out / OK / "seed-1" / "sweep-run.json")
     assert record["status"] == "finished" and record["returncode"] == 0
-    assert record["flags"] == ["--max-force", "10", *TINY[1:]]
+    assert record["flags"] == ["--max-data", "0", *TINY[1:]]
     assert (out / "success_rate.png").stat().st_size > 0
 
 
@@ -73,7 +74,7 @@ def test_a_failing_run_is_reported_with_its_error_and_the_others_kept(sweep):
     for failure in report["failures"]:
         assert failure["attempts"] == 1
         assert "exit code 1" in failure["error"]
-        assert "max_force must be > 0" in failure["stderr_tail"]
+        assert "max_data must be at least 2" in failure["stderr_tail"]
     assert load(out / BAD / "seed-0" / "sweep-run.json")["status"] == "failed"
     assert report["results"][OK]["finished"] == 2
 
@@ -106,7 +107,7 @@ def test_a_finished_sweep_starts_no_run(sweep, monkeypatch):
         raise AssertionError("a finished sweep must start no run")
 
     monkeypatch.setattr(runs, "execute", no_runs)
-    good_only = [a if a != "max_force=10,-1" else "max_force=10" for a in COMMAND]
+    good_only = [a if a != "max_data=0,1" else "max_data=0" for a in COMMAND]
     assert cli.main([*good_only, "--output", str(out), "--no-figures", *TINY]) == 0
     assert [r["status"] for r in load(out / "sweep.json")["runs"]] == ["skipped", "skipped"]
 
