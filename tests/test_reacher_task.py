@@ -121,11 +121,11 @@ def priors_of(agent):
 
 
 def test_the_paper_preset_puts_the_paper_codes_priors_on_every_gp():
-    agent = tiny_agent
-    plain, paper = agent([]), agent(["--preset", "paper-code"])
+    plain, paper = tiny_agent([]), tiny_agent(["--preset", "paper-code"])
     assert priors_of(plain) == [(None, None)] * 10
     assert priors_of(paper) == [((1.0, 10.0), (1.5, 2.0))] * 10
-    assert priors_of(agent(["--preset", "paper-code", "--gp-priors", "none"]))[0] == (None, None)
+    unset = tiny_agent(["--preset", "paper-code", "--gp-priors", "none"])
+    assert priors_of(unset)[0] == (None, None)
     # the priors enter the loss that training minimises: same hyperparameters, the loss
     # differs by exactly the negative log prior density (a finite, nonzero number)
     for a, b in zip(plain.mgpr.models, paper.mgpr.models):
