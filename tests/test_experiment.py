@@ -255,6 +255,18 @@ def test_the_first_policy_optimisation_can_have_its_own_budget(tmp_path):
         config(episodes=0)
 
 
+def test_the_policy_search_hook_runs_before_each_policy_search(tmp_path):
+    seen = []
+
+    def hook(agent, number):
+        # the model of this episode is trained, its policy not yet optimised
+        seen.append((number, [c[0] for c in agent.calls].count("policy")))
+
+    exp, agents = experiment(tmp_path, before_policy_search=hook)
+    exp.run()
+    assert seen == [(2, 0), (3, 1), (4, 2)]
+
+
 def test_presets_sit_between_the_defaults_and_the_flags_given(tmp_path):
     import argparse
 

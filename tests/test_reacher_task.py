@@ -103,6 +103,35 @@ def test_the_default_agent_has_the_limit_bumps_and_the_paper_preset_not():
     assert reward_terms(["--preset", "paper-code"])[0] == ["ExponentialReward"]
 
 
+def test_the_schedule_widens_the_main_cost_and_start_variance_early_only():
+    argv = ["--early-cost-width", "1.0", "--early-start-var", "0.1", "--early-episodes", "2"]
+    agent = tiny_agent(argv)
+    args = reacher.parse_args([*argv, "--basis-functions", "3"])
+    hook = reacher.schedule(args)
+    main = reacher.main_position_reward(agent.reward)
+    fine = agent.reward.base_rewards[0].base_rewards[1]
+    far = np.concatenate([[1.2 + 0.5, 0.38, 0.38], np.zeros(7)])[None, :]
+
+    def main_reward_at_far():
+        return float(main.moments(far, np.zeros((10, 10)))[0].numpy().squeeze())
+
+    assert main_reward_at_far() == pytest.approx(np.exp(-0.5 * 0.5 ** 2 / 0.2 ** 2))
+    for number, width, var in [(2, 1.0, 0.1), (3, 1.0, 0.1), (4, 0.2, 1e-4), (2, 1.0, 0.1)]:
+        hook(agent, number)  # episode 1 is the random one
+        assert main_reward_at_far() == pytest.approx(np.exp(-0.5 * 0.5 ** 2 / width ** 2))
+        np.testing.assert_allclose(agent.S_init, var * np.eye(10))
+        # the fine cost and the target stay
+        np.testing.assert_allclose(np.diag(fine.W.numpy())[:3], 1 / 0.05 ** 2)
+        np.testing.assert_allclose(main.t.numpy()[0, :3], [1.2, 0.38, 0.38])
+    # without the flags the hook changes nothing
+    plain = tiny_agent([])
+    before = plain.reward.base_rewards[0].base_rewards[0].W.numpy().copy(), plain.S_init
+    reacher.schedule(reacher.parse_args([]))(plain, 2)
+    np.testing.assert_array_equal(reacher.main_position_reward(plain.reward).W.numpy(),
+                                  before[0])
+    np.testing.assert_array_equal(plain.S_init, before[1])
+
+
 def test_the_adaptation_keeps_the_earlier_single_cost():
     from pilco.tasks import adaptation
 

@@ -46,6 +46,8 @@ def improve_policy(exp, number: int) -> float:
     first = number == cfg.random_episodes + 1
     iters = cfg.policy_iters_first if first and cfg.policy_iters_first else cfg.policy_iters
     early_stop = cfg.policy_early_stop == "always" or exp.solved_at_episode() is not None
+    if exp.before_policy_search is not None:
+        exp.before_policy_search(agent, number)
     with progress_bar(iters * cfg.policy_restarts, f"episode {number} policy",
                       cfg.quiet) as bar:
         expected = agent.optimize_policy(

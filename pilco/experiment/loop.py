@@ -55,6 +55,8 @@ class Experiment(RunRecord):
         render_fn: ``Episode -> frames`` drawing the final episode after it ran (e.g. a
             replay in another process); the env then never renders during rollouts.
         after_model_fit: ``agent -> None`` called after every ``optimize_models``.
+        before_policy_search: ``(agent, episode number) -> None`` called before every
+            ``optimize_policy`` (e.g. a reward that changes with the episode).
         success_fn: ``summary -> bool``, the task's success rule written to the summary
             as ``"success"`` (default: ``summary["solved"]``).
 
@@ -69,12 +71,14 @@ class Experiment(RunRecord):
                  args: Optional[Dict[str, Any]] = None,
                  render_fn: Optional[Callable[[Episode], List[np.ndarray]]] = None,
                  after_model_fit: Optional[Callable[[Any], None]] = None,
+                 before_policy_search: Optional[Callable[[Any, int], None]] = None,
                  success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None):
         super().__init__(config, directory, args, success_fn)
         self.build_agent = build_agent
         self.distance_fn = distance_fn or distance_from_info
         self.render_fn = render_fn
         self.after_model_fit = after_model_fit
+        self.before_policy_search = before_policy_search
         self._make_env = make_env
         self.env = None
 

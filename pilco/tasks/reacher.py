@@ -101,6 +101,14 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                         "(0: none)")
     g.add_argument("--limit-cost-weight", type=non_negative_float, default=0.5,
                    help="weight of each joint-limit bump against the position cost")
+    g.add_argument("--early-cost-width", type=non_negative_float, default=0.0,
+                   help="width [m] of the main cost in the first --early-episodes learned "
+                        "episodes (then --cost-width again; 0: no schedule)")
+    g.add_argument("--early-start-var", type=non_negative_float, default=0.0,
+                   help="variance of the initial state distribution in the first "
+                        "--early-episodes learned episodes (then --start-var; 0: no schedule)")
+    g.add_argument("--early-episodes", type=positive_int, default=1,
+                   help="learned episodes that use --early-cost-width / --early-start-var")
     g.add_argument("--gp-priors", choices=("none", "paper"), default="none",
                    help="priors on the dynamics GPs' hyperparameters: 'paper' the paper "
                         "code's Gamma priors on lengthscales and signal variance (MAP)")
@@ -256,6 +264,38 @@ def set_gp_priors(agent, args: argparse.Namespace) -> None:
                 tf.constant(shape, tf.float64), tf.constant(1.0 / scale, tf.float64))
 
 
+def main_position_reward(reward):
+    """The reacher's main position cost inside its (possibly nested) combined reward:
+    the first component, all the way down."""
+    while hasattr(reward, "base_rewards"):
+        reward = reward.base_rewards[0]
+    return reward
+
+
+def schedule(args: argparse.Namespace):
+    """``(agent, episode number) -> None`` run before every policy search: in the first
+    ``--early-episodes`` learned episodes the main cost has width ``--early-cost-width``
+    and the initial state variance is ``--early-start-var`` (when set), afterwards the
+    flags' ``--cost-width`` and ``--start-var``. Works on a resumed agent too: it sets
+    both every time."""
+    early_width = getattr(args, "early_cost_width", 0.0)
+    early_var = getattr(args, "early_start_var", 0.0)
+
+    def before_policy_search(agent, number: int) -> None:
+        early = number - args.random_episodes <= args.early_episodes
+        if early_width:
+            width = early_width if early else args.cost_width
+            main = main_position_reward(agent.reward)
+            W = np.zeros_like(main.W.numpy())
+            W[:3, :3] = np.eye(3) / width ** 2
+            main.W.assign(W)
+        if early_var:
+            D = agent.state_dim
+            agent.S_init = (early_var if early else args.start_var) * np.eye(D)
+
+    return before_policy_search
+
+
 def after_model_fit(args: argparse.Namespace):
     """``agent -> None`` run after building the agent and every model fit:
     :func:`ignore_constant_inputs` unless ``--constant-input-lengthscale 0``."""
@@ -297,6 +337,7 @@ def make_experiment(args: argparse.Namespace, task: str = "reacher",
     build = agent_builder(args, target, env.unwrapped.joint_limits)
     exp = open_experiment(args, config, build, make_env=lambda: env,
                           render_fn=render, after_model_fit=after_model_fit(args),
+                          before_policy_search=schedule(args),
                           success_fn=success_fn or reached_within(SUCCESS_STEPS))
     if exp.agent is not None:  # resumed from agent.npz, which holds no priors
         set_gp_priors(exp.agent, args)
