@@ -27,7 +27,8 @@ from .validation import (
     check_weight_matrix,
 )
 
-__all__ = ["ExponentialReward", "LinearReward", "CombinedRewards", "CartPoleReward"]
+__all__ = ["ExponentialReward", "AxisBumpsReward", "LinearReward", "CombinedRewards",
+           "CartPoleReward"]
 
 
 def _exp_reward_moments(m, s, W, t):
@@ -84,6 +85,59 @@ class ExponentialReward(_Reward):
 
     def moments(self, m, s):
         return _exp_reward_moments(m, s, tf.convert_to_tensor(self.W), tf.convert_to_tensor(self.t))
+
+
+class AxisBumpsReward(_Reward):
+    """Weighted sum of one-dimensional saturating bumps, ``sum_k c_k exp(-(x[d_k] - t_k)^2
+    / (2 w_k^2))``, each on one state dimension ``d_k`` (several may share one).
+
+    The same value as a :class:`CombinedRewards` of one :class:`ExponentialReward` per
+    bump (``W`` with the single entry ``1 / w_k^2`` at ``[d_k, d_k]``), including its
+    variance ``sum_k c_k^2 Var[bump_k]`` (covariances between bumps neglected), but
+    computed for all bumps at once in a few operations instead of two solves and two
+    log-determinants per bump: e.g. the reacher's 14 joint-limit bumps.
+
+    Shapes: ``dims`` [K] integers in ``range(state_dim)``, ``t`` [K] centres, ``widths``
+    [K] > 0, ``coefs`` [K] (default ones). ``t``, ``widths`` and ``coefs`` are
+    non-trainable parameters that can be reassigned.
+    """
+
+    def __init__(self, state_dim: int, dims, t, widths, coefs=None):
+        super().__init__()
+        self.state_dim = D = check_positive_int(state_dim, "state_dim")
+        if isinstance(dims, (str, bytes)):
+            raise TypeError(f"dims must be a sequence of integers, got {dims!r}")
+        dims = list(np.atleast_1d(np.asarray(dims, dtype=object)))
+        if not dims:
+            raise ValueError("dims must name at least one state dimension")
+        for d in dims:
+            if isinstance(d, (bool, np.bool_)) or not isinstance(d, (int, np.integer)):
+                raise TypeError(f"dims must hold integers, got {d!r}")
+            if not 0 <= d < D:
+                raise ValueError(f"dims: index {int(d)} is outside the state (dimension {D})")
+        K = len(dims)
+        self.dims = tuple(int(d) for d in dims)
+        widths = check_entries(widths, K, "widths")
+        if np.any(widths <= 0):
+            raise ValueError(f"widths must be positive, got {widths}")
+        coefs = np.ones(K) if coefs is None else check_entries(coefs, K, "coefs")
+        self.t = gpflow.Parameter(check_entries(t, K, "t", "t (the centres)"), trainable=False)
+        self.widths = gpflow.Parameter(widths, trainable=False)
+        self.coefs = gpflow.Parameter(coefs, trainable=False)
+
+    def moments(self, m, s):
+        dims = tf.constant(self.dims)
+        d = tf.gather(m[0], dims) - tf.convert_to_tensor(self.t)  # [K]
+        var = tf.gather(tf.linalg.diag_part(s), dims)  # [K]
+        w2 = tf.square(tf.convert_to_tensor(self.widths))
+        c = tf.convert_to_tensor(self.coefs)
+        # E[bump] = (1 + v / w^2)^-1/2 exp(-d^2 / (2 (w^2 + v))); E[bump^2] the same with
+        # twice the variance and without the 1/2 in the exponent
+        mean = tf.exp(-0.5 * tf.square(d) / (w2 + var)) * tf.math.rsqrt(1.0 + var / w2)
+        second = tf.exp(-tf.square(d) / (w2 + 2.0 * var)) * tf.math.rsqrt(1.0 + 2.0 * var / w2)
+        total = tf.reduce_sum(c * mean)
+        spread = tf.reduce_sum(tf.square(c) * (second - tf.square(mean)))
+        return tf.reshape(total, [1, 1]), tf.reshape(spread, [1, 1])
 
 
 class LinearReward(_Reward):

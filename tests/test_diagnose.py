@@ -18,7 +18,7 @@ from pilco.experiment.diagnostics import (cost_geometry, distance_moments, mean_
 from pilco.experiment.reconstruct import action_error, agent_of_episode
 from pilco.experiment.report import format_diagnosis
 from pilco.models import PILCO
-from pilco.rewards import CartPoleReward, CombinedRewards, ExponentialReward
+from pilco.rewards import AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward
 
 WIDTH = 0.5  # cost width of the line task [m]
 STEPS = 6
@@ -209,6 +209,12 @@ def test_the_cost_slope_and_the_distance_a_cost_measures():
     combined = cost_geometry(CombinedRewards(D, [ExponentialReward(D, W, t),
                                                  ExponentialReward(D, 16 * W, t)]))
     assert combined.width == pytest.approx(sigma) and combined.max_reward == 2.0
+    # a subtracted penalty (the reacher's joint-limit bumps) is not part of the geometry
+    penalised = cost_geometry(CombinedRewards(D, [ExponentialReward(D, W, t),
+                                                  AxisBumpsReward(D, [3, 3], [-1, 1], [.1, .1])],
+                                              [1.0, -0.5]))
+    assert penalised.width == pytest.approx(sigma) and penalised.max_reward == 1.0
+    assert penalised.dims == (0, 1, 2)
     tip = cost_geometry(CartPoleReward(pendulum_length=0.5, width=0.25))
     states = np.array([[0.0, 0, 0, np.pi], [0.0, 0, 0, 0.0], [0.3, 0, 0, np.pi]])
     np.testing.assert_allclose(tip.distance(states), [0.0, 1.0, 0.3], atol=1e-12)

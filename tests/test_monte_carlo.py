@@ -35,7 +35,7 @@ import pytest
 from pilco.angles import augment_state, trig_moments
 from pilco.controllers import LinearController, RbfController, squash_sat, squash_sin
 from pilco.models import MGPR, PILCO, SMGPR
-from pilco.rewards import CartPoleReward, ExponentialReward
+from pilco.rewards import AxisBumpsReward, CartPoleReward, ExponentialReward
 
 N_MC = 200_000
 Z_TOL = 5.0  # tolerance, in Monte Carlo standard errors
@@ -398,6 +398,26 @@ def test_exponential_reward_matches_monte_carlo():
     wrong_var = mean - mean ** 2
     assert_rejects("E[r^2] computed with W instead of 2W", wrong_var, v_mc, v_se)
     assert_rejects("variance 0", 0.0 * var, v_mc, v_se)
+
+
+def test_axis_bumps_match_monte_carlo():
+    """One bump per dimension and a diagonal covariance: the bumps are independent, so the
+    summed variance (covariances neglected) is exact."""
+    rng = np.random.default_rng(9)
+    dims, t, w, c = [0, 2, 1], np.array([0.4, -0.3, 1.0]), np.array([0.3, 0.5, 0.2]), \
+        np.array([1.0, -0.5, 2.0])
+    m = np.array([[0.1, 0.8, -0.1]])
+    s = np.diag([0.2, 0.05, 0.3])
+    mean, var = (np_(v) for v in AxisBumpsReward(3, dims, t, w, c).compute_reward(m, s))
+    assert mean.shape == (1, 1) and var.shape == (1, 1)
+    x = gauss(rng, m, s)
+    r = (c * np.exp(-0.5 * (x[:, dims] - t) ** 2 / w ** 2)).sum(1, keepdims=True)
+    r_mc, r_se = mc_mean(r)
+    v_mc, v_se = mc_cov(r)
+    assert_mc("E[r]", mean, r_mc, r_se)
+    assert_mc("Var[r]", var, v_mc, v_se)
+    assert_rejects("bumps at the mean state", r.mean() * 0 + (c * np.exp(
+        -0.5 * (m[0, dims] - t) ** 2 / w ** 2)).sum(), r_mc, r_se)
 
 
 def cartpole_reward_np(x, ell=0.5, w=0.25):

@@ -13,7 +13,8 @@ import pytest
 from pilco import persistence
 from pilco.controllers import LinearController, RbfController, squash_sat, squash_sin
 from pilco.models import MGPR, PILCO, SMGPR
-from pilco.rewards import CartPoleReward, CombinedRewards, ExponentialReward, LinearReward
+from pilco.rewards import (AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward,
+                           LinearReward)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,7 +35,10 @@ def rbf_agent(seed=0):
     controller.models[0].kernel.lengthscales.assign(rng.uniform(0.5, 2.0, D + 1))
     reward = CombinedRewards(
         D, [ExponentialReward(D, W=np.diag([1.0, 2.0, 0.5]), t=np.arange(D)),
-            CombinedRewards(D, [LinearReward(D, [0.1, -0.2, 0.3])], coefs=[0.5])],
+            CombinedRewards(D, [LinearReward(D, [0.1, -0.2, 0.3]),
+                                AxisBumpsReward(D, [0, 2, 2], [0.5, -1.0, 1.0],
+                                                [0.3, 0.2, 0.4], [1.0, 0.5, 2.0])],
+                            coefs=[0.5, -0.7])],
         coefs=[1.0, -0.25],
     )
     agent = PILCO((X, Y), controller, reward, horizon=5, angle_indices=ang,

@@ -14,15 +14,14 @@ LIMITS = np.array([[-1.6056, 1.6056], [-1.221, 1.518], [-np.inf, np.inf], [-2.25
 
 def test_one_bump_per_finite_limit_on_its_joint():
     bumps = reacher.limit_bumps(10, LIMITS, 0.1)
-    assert len(bumps) == 8
-    centres = sorted((int(np.argmax(np.diag(b.W.numpy()))), float(b.t.numpy()[0, np.argmax(
-        np.diag(b.W.numpy()))])) for b in bumps)
+    centres = sorted(zip(bumps.dims, bumps.t.numpy()))
     expected = sorted((3 + j, v) for j in (0, 1, 3, 5) for v in LIMITS[j])
     assert [c[0] for c in centres] == [e[0] for e in expected]
     np.testing.assert_allclose([c[1] for c in centres], [e[1] for e in expected])
-    for b in bumps:  # each looks at one joint angle only, with width 0.1 rad
-        W = b.W.numpy()
-        assert np.count_nonzero(W) == 1 and W.max() == pytest.approx(100.0)
+    # each looks at one joint angle only, with width 0.1 rad and weight 1
+    np.testing.assert_allclose(bumps.widths.numpy(), 0.1)
+    np.testing.assert_allclose(bumps.coefs.numpy(), 1.0)
+    assert reacher.limit_bumps(10, np.full((7, 2), np.inf) * [-1, 1], 0.1) is None
 
 
 def test_the_bumps_lower_the_reward_near_a_limit_only():
@@ -30,7 +29,7 @@ def test_the_bumps_lower_the_reward_near_a_limit_only():
     target = np.zeros((1, D))
     position = ExponentialReward(D, np.diag([1.0] * 3 + [0.0] * 7), target)
     bumps = reacher.limit_bumps(D, LIMITS, 0.1)
-    reward = CombinedRewards(D, [position, *bumps], [1.0] + [-0.5] * len(bumps))
+    reward = CombinedRewards(D, [position, bumps], [1.0, -0.5])
     s = 1e-6 * np.eye(D)
 
     def value(q):
@@ -96,9 +95,10 @@ def test_the_default_agent_has_the_limit_bumps_and_the_paper_preset_not():
         return [type(t).__name__ for t in getattr(r, "base_rewards", [r])], r
 
     names, reward = reward_terms([])
-    # the position cost (coarse + fine) and one bump per finite limit, subtracted
-    assert names == ["CombinedRewards"] + ["ExponentialReward"] * 8
-    np.testing.assert_allclose(reward.coefs.numpy(), [1.0] + [-0.5] * 8)
+    # the position cost (coarse + fine) and the bumps at the finite limits, subtracted
+    assert names == ["CombinedRewards", "AxisBumpsReward"]
+    assert len(reward.base_rewards[1].dims) == 8
+    np.testing.assert_allclose(reward.coefs.numpy(), [1.0, -0.5])
     assert reward_terms(["--limit-cost", "0"])[0] == ["ExponentialReward"] * 2
     assert reward_terms(["--preset", "paper-code"])[0] == ["ExponentialReward"]
 

@@ -82,7 +82,8 @@ class CostGeometry:
 
 def cost_geometry(reward) -> Optional[CostGeometry]:
     """The :class:`CostGeometry` of ``ExponentialReward``, ``CartPoleReward`` and
-    ``CombinedRewards`` of them (the widest part's); None for other rewards."""
+    ``CombinedRewards`` of them (the widest positively weighted part's; parts with a
+    negative weight are penalties and left out); None for other rewards."""
     from ..rewards import CartPoleReward, CombinedRewards, ExponentialReward
 
     if isinstance(reward, ExponentialReward):
@@ -109,13 +110,17 @@ def cost_geometry(reward) -> Optional[CostGeometry]:
 
         return CostGeometry(float(reward.width), (0, 3), tip_offset)
     if isinstance(reward, CombinedRewards):
-        parts = [cost_geometry(r) for r in reward.base_rewards]
-        if any(p is None for p in parts):
-            return None
+        # parts with a negative weight are penalties (e.g. joint-limit bumps), ~0 at the
+        # target: the geometry and the best reward are those of the positive parts
         coefs = np.asarray(reward.coefs.numpy(), dtype=np.float64)
+        positive = [(c, r) for c, r in zip(coefs, reward.base_rewards) if c > 0]
+        parts = [cost_geometry(r) for _, r in positive]
+        if not parts or any(p is None for p in parts):
+            return None
         widest = max(parts, key=lambda p: p.width)
         return dataclasses.replace(
-            widest, max_reward=float(np.sum(coefs * [p.max_reward for p in parts])))
+            widest, max_reward=float(sum(c * p.max_reward for (c, _), p in zip(positive,
+                                                                               parts))))
     return None
 
 

@@ -24,7 +24,8 @@ from .. import __version__, moments
 from ..controllers import LinearController, RbfController, squash_sat, squash_sin
 from ..deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
 from ..files import write_npz_atomic
-from ..rewards import CartPoleReward, CombinedRewards, ExponentialReward, LinearReward
+from ..rewards import (AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward,
+                       LinearReward)
 from ..validation import check_format_version, check_path
 from .mgpr import MGPR
 from .smgpr import SMGPR
@@ -162,6 +163,10 @@ def _reward_spec(reward, arrays, prefix: str) -> dict:
         arrays[prefix + "W"] = reward.W.numpy()
         arrays[prefix + "t"] = reward.t.numpy()
         return dict(type="ExponentialReward", state_dim=reward.state_dim)
+    if kind is AxisBumpsReward:
+        for name in ("t", "widths", "coefs"):
+            arrays[prefix + name] = getattr(reward, name).numpy()
+        return dict(type="AxisBumpsReward", state_dim=reward.state_dim, dims=list(reward.dims))
     if kind is LinearReward:
         arrays[prefix + "W"] = reward.W.numpy()
         return dict(type="LinearReward", state_dim=reward.state_dim)
@@ -175,7 +180,7 @@ def _reward_spec(reward, arrays, prefix: str) -> dict:
                     width=reward.width)
     raise TypeError(
         f"cannot save a reward of type {kind.__name__}: supported are ExponentialReward, "
-        f"LinearReward, CombinedRewards and CartPoleReward"
+        f"AxisBumpsReward, LinearReward, CombinedRewards and CartPoleReward"
     )
 
 
@@ -184,6 +189,10 @@ def _build_reward(spec: dict, arrays, prefix: str, path):
     if kind == "ExponentialReward":
         return ExponentialReward(spec["state_dim"], W=_get(arrays, prefix + "W", path),
                                  t=_get(arrays, prefix + "t", path))
+    if kind == "AxisBumpsReward":
+        return AxisBumpsReward(spec["state_dim"], spec["dims"],
+                               *(_get(arrays, prefix + name, path)
+                                 for name in ("t", "widths", "coefs")))
     if kind == "LinearReward":
         return LinearReward(spec["state_dim"], W=_get(arrays, prefix + "W", path))
     if kind == "CombinedRewards":

@@ -213,10 +213,10 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray,
         reward = position_reward(D, args.cost_width)
         if args.fine_cost_width:
             reward = CombinedRewards(D, [reward, position_reward(D, args.fine_cost_width)])
-        if getattr(args, "limit_cost", 0.0) and joint_limits is not None:
-            bumps = limit_bumps(D, joint_limits, args.limit_cost)
-            reward = CombinedRewards(D, [reward, *bumps],
-                                     [1.0] + [-args.limit_cost_weight] * len(bumps))
+        bumps = (limit_bumps(D, joint_limits, args.limit_cost)
+                 if getattr(args, "limit_cost", 0.0) and joint_limits is not None else None)
+        if bumps is not None:
+            reward = CombinedRewards(D, [reward, bumps], [1.0, -args.limit_cost_weight])
         agent = PILCO(data, controller, reward, horizon=args.planning_horizon or args.horizon,
                       m_init=start_states[0:1], S_init=args.start_var * np.eye(D))
         set_gp_priors(agent, args)
@@ -226,26 +226,25 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray,
     return build
 
 
-def limit_bumps(state_dim: int, joint_limits: np.ndarray, width: float) -> List[Any]:
-    """One :class:`~pilco.rewards.ExponentialReward` per finite joint limit: a bump of
-    ``width`` [rad] centred on the limit of joint ``j`` (state dim ``3 + j``), highest
-    (1) at the limit. Subtracted from the reward, they keep the predicted joint angles
-    away from the limits, where the real joint stops but the GP model, which rarely
-    sees a joint at its limit, predicts it moving on."""
-    from ..rewards import ExponentialReward
+def limit_bumps(state_dim: int, joint_limits: np.ndarray, width: float):
+    """An :class:`~pilco.rewards.AxisBumpsReward` with one bump of ``width`` [rad] per
+    finite joint limit, centred on the limit of joint ``j`` (state dim ``3 + j``), highest
+    (1) at the limit; ``None`` when no joint is limited. Subtracted from the reward, the
+    bumps keep the predicted joint angles away from the limits, where the real joint
+    stops but the GP model, which rarely sees a joint at its limit, predicts it moving
+    on."""
+    from ..rewards import AxisBumpsReward
 
     limits = np.asarray(joint_limits, dtype=np.float64)
-    bumps = []
+    dims, centres = [], []
     for j, bounds in enumerate(limits):
         for value in bounds:
-            if not np.isfinite(value):
-                continue
-            W = np.zeros((state_dim, state_dim))
-            W[3 + j, 3 + j] = 1.0 / width ** 2
-            t = np.zeros((1, state_dim))
-            t[0, 3 + j] = value
-            bumps.append(ExponentialReward(state_dim, W, t))
-    return bumps
+            if np.isfinite(value):
+                dims.append(3 + j)
+                centres.append(value)
+    if not dims:
+        return None
+    return AxisBumpsReward(state_dim, dims, centres, np.full(len(dims), float(width)))
 
 
 def set_gp_priors(agent, args: argparse.Namespace) -> None:
