@@ -160,3 +160,57 @@ def test_smgpr_log_marginal_likelihood():
     gp = SMGPR(training_data(), num_induced_points=15, seed=0)
     lml = gp.log_marginal_likelihood()
     assert lml.shape == (2,) and np.all(np.isfinite(lml))
+
+
+def per_output_losses_and_gradients(gp, batched):
+    """The summed training loss's value per output and its gradient, through the batched
+    computation or through each output's own GPflow loss."""
+    import tensorflow as tf
+
+    variables = gp.trainable_variables
+    with tf.GradientTape() as tape:
+        losses = (gp._batched_losses() if batched
+                  else tf.stack([gp._model_loss(m) for m in gp.models]))
+        total = tf.reduce_sum(losses)
+    return losses.numpy(), [g.numpy() for g in tape.gradient(total, variables)]
+
+
+def test_the_batched_training_loss_is_each_outputs_gpflow_loss():
+    import tensorflow_probability as tfp
+
+    X, Y = training_data(N=30)
+    X = np.column_stack([X, np.full(len(X), 0.7)])  # a constant input column
+    gp = MGPR((X, np.column_stack([Y, Y[:, 0] ** 2])))
+    rng = np.random.default_rng(3)
+    for m in gp.models:
+        m.kernel.lengthscales.assign(rng.uniform(0.5, 2.0, 3))
+        m.kernel.variance.assign(rng.uniform(0.2, 2.0))
+        m.likelihood.variance.assign(rng.uniform(1e-3, 1e-1))
+    # the bounds' penalty is active: one lengthscale 1000x its input's spread
+    gp.models[1].kernel.lengthscales.assign([1.0, 2000.0, 1.0])
+    gpflow.set_trainable(gp.models[2].likelihood.variance, False)
+    assert gp._batchable()
+    for priors in (False, True):
+        if priors:
+            for m in gp.models:
+                m.kernel.lengthscales.prior = tfp.distributions.Gamma(
+                    np.float64(1.0), np.float64(0.1))
+        fast, fast_grad = per_output_losses_and_gradients(gp, batched=True)
+        slow, slow_grad = per_output_losses_and_gradients(gp, batched=False)
+        np.testing.assert_allclose(fast, slow, rtol=1e-10)
+        assert len(fast_grad) == len(slow_grad) == 3 * 3 - 1
+        for a, b in zip(fast_grad, slow_grad):
+            np.testing.assert_allclose(a, b, rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(gp._model_losses(), slow, rtol=1e-10)
+    assert fast[1] > slow[0] + 1e3  # the penalty counted, per output
+
+
+def test_other_output_models_keep_their_own_losses():
+    X, Y = training_data(N=30)
+    sparse = SMGPR((X, Y), 8, seed=0)
+    assert not sparse._batchable()
+    np.testing.assert_allclose(sparse._model_losses(),
+                               [sparse._model_loss(m).numpy() for m in sparse.models])
+    gp = MGPR((X, Y))
+    gp.models[0].kernel = gpflow.kernels.Matern52(lengthscales=np.ones(2))
+    assert not gp._batchable()

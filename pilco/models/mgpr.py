@@ -196,6 +196,13 @@ class MGPR(gpflow.base.Module):
     # -- training -------------------------------------------------------------------------
     def _penalty(self, model) -> tf.Tensor:
         """Soft bounds on the signal-to-noise ratio and the lengthscales (see module doc)."""
+        return self._penalties(tf.convert_to_tensor(model.kernel.lengthscales)[None, :],
+                               tf.convert_to_tensor(model.kernel.variance)[None],
+                               tf.convert_to_tensor(model.likelihood.variance)[None])[0]
+
+    def _penalties(self, ell, sf2, sn2) -> tf.Tensor:
+        """:meth:`_penalty` of E outputs at once: lengthscales [E, D], signal and noise
+        variances [E] -> [E]."""
         power = 30.0
         X = tf.convert_to_tensor(self._X)
         n = tf.cast(tf.shape(X)[0], X.dtype)
@@ -204,22 +211,66 @@ class MGPR(gpflow.base.Module):
         # constant inputs leave the evidence flat in their lengthscale: bound it around 1
         # instead of pulling it towards a zero spread (which would make it ~1e-6)
         std = tf.where(std > 1e-8, std, tf.ones_like(std))
-        log_ell = tf.math.log(tf.convert_to_tensor(model.kernel.lengthscales))
         ell_term = tf.reduce_sum(
-            ((log_ell - tf.math.log(std)) / np.log(self.max_lengthscale_ratio)) ** power
-        )
-        log_snr = 0.5 * (tf.math.log(tf.convert_to_tensor(model.kernel.variance))
-                         - tf.math.log(tf.convert_to_tensor(model.likelihood.variance)))
+            ((tf.math.log(ell) - tf.math.log(std)) / np.log(self.max_lengthscale_ratio))
+            ** power, axis=-1)
+        log_snr = 0.5 * (tf.math.log(sf2) - tf.math.log(sn2))
         return ell_term + (log_snr / np.log(self.max_snr)) ** power
 
     def _model_loss(self, model) -> tf.Tensor:
         return model.training_loss() + self._penalty(model)
 
+    def _batchable(self) -> bool:
+        """Every output is a plain GPR with an ARD squared-exponential kernel on all inputs,
+        a Gaussian likelihood and a zero mean (the models this class builds): their losses
+        can then be computed as one batch (:meth:`_batched_losses`)."""
+        return all(
+            type(m) is gpflow.models.GPR
+            and type(m.kernel) is gpflow.kernels.SquaredExponential
+            and m.kernel.active_dims == slice(None, None, None)
+            and type(m.likelihood) is gpflow.likelihoods.Gaussian
+            and type(m.mean_function) is gpflow.mean_functions.Zero
+            for m in self.models)
+
+    def _batched_losses(self) -> tf.Tensor:
+        """The outputs' training losses [E] (negative log evidence, minus the log prior
+        densities, plus the soft bounds of :meth:`_penalty`) as one batched computation:
+        the same values as :meth:`_model_loss` of each output, but one [E, N, N] Cholesky
+        and a graph of ~1/E the operations (tracing and per-call overhead of the training
+        loss fall accordingly)."""
+        models = self.models
+        X = tf.convert_to_tensor(self._X)  # [N, D]
+        Y = tf.concat([tf.convert_to_tensor(y) for y in self._Y], axis=1)  # [N, E]
+        ell = tf.stack([tf.convert_to_tensor(m.kernel.lengthscales) for m in models])  # [E, D]
+        sf2 = tf.stack([tf.convert_to_tensor(m.kernel.variance) for m in models])  # [E]
+        sn2 = tf.stack([tf.convert_to_tensor(m.likelihood.variance) for m in models])  # [E]
+        Xs = X[None, :, :] / ell[:, None, :]  # [E, N, D]
+        sq = tf.reduce_sum(tf.square(Xs), axis=-1)  # [E, N]
+        r2 = sq[:, :, None] + sq[:, None, :] - 2.0 * tf.matmul(Xs, Xs, transpose_b=True)
+        K = sf2[:, None, None] * tf.exp(-0.5 * tf.maximum(r2, 0.0))
+        K = tf.linalg.set_diag(K, tf.linalg.diag_part(K) + sn2[:, None])
+        L = tf.linalg.cholesky(K)  # [E, N, N]
+        alpha = tf.linalg.triangular_solve(L, tf.transpose(Y)[:, :, None], lower=True)
+        n = tf.cast(tf.shape(X)[0], X.dtype)
+        log_evidence = (-0.5 * tf.reduce_sum(tf.square(alpha), axis=[1, 2])
+                        - tf.reduce_sum(tf.math.log(tf.linalg.diag_part(L)), axis=1)
+                        - 0.5 * n * np.log(2.0 * np.pi))
+        loss = -log_evidence + self._penalties(ell, sf2, sn2)
+        if any(p.prior is not None for m in models for p in m.trainable_parameters):
+            loss -= tf.stack([tf.cast(m.log_prior_density(), X.dtype) for m in models])
+        return loss
+
+    def _output_losses(self) -> tf.Tensor:
+        """Training loss of every output [E]: batched when :meth:`_batchable`."""
+        if self._batchable():
+            return self._batched_losses()
+        return tf.stack([self._model_loss(m) for m in self.models])
+
     def _model_losses(self) -> np.ndarray:
-        return np.array([float(self._model_loss(m).numpy()) for m in self.models])
+        return self._output_losses().numpy().astype(np.float64)
 
     def _training_loss(self):
-        return tf.add_n([self._model_loss(m) for m in self.models])
+        return tf.reduce_sum(self._output_losses())
 
     def log_marginal_likelihood(self) -> np.ndarray:
         """Log evidence of each output's GP, [E] (priors excluded)."""
