@@ -123,13 +123,54 @@ def test_the_schedule_widens_the_main_cost_and_start_variance_early_only():
         # the fine cost and the target stay
         np.testing.assert_allclose(np.diag(fine.W.numpy())[:3], 1 / 0.05 ** 2)
         np.testing.assert_allclose(main.t.numpy()[0, :3], [1.2, 0.38, 0.38])
-    # without the flags the hook changes nothing
-    plain = tiny_agent([])
+    # without a schedule the hook changes nothing
+    off = ["--early-start-var", "0"]
+    plain = tiny_agent(off)
     before = plain.reward.base_rewards[0].base_rewards[0].W.numpy().copy(), plain.S_init
-    reacher.schedule(reacher.parse_args([]))(plain, 2)
+    reacher.schedule(reacher.parse_args(off))(plain, 2)
     np.testing.assert_array_equal(reacher.main_position_reward(plain.reward).W.numpy(),
                                   before[0])
     np.testing.assert_array_equal(plain.S_init, before[1])
+
+
+def test_only_the_healthy_reacher_widens_its_first_learned_start_by_default():
+    from pilco.tasks import adaptation
+
+    healthy = reacher.parse_args([])
+    assert (healthy.early_start_var, healthy.early_cost_width, healthy.early_episodes) == (
+        0.1, 0.0, 1)
+    assert reacher.parse_args([], damaged=True).early_start_var == 0.0
+    assert adaptation.parse_args([]).early_start_var == 0.0
+    assert reacher.parse_args(["--preset", "paper-code"]).early_start_var == 0.0
+    agent = tiny_agent([])
+    hook = reacher.schedule(healthy)
+    hook(agent, 2)
+    np.testing.assert_allclose(agent.S_init, 0.1 * np.eye(10))
+    hook(agent, 3)
+    np.testing.assert_allclose(agent.S_init, 1e-4 * np.eye(10))
+
+
+def test_a_run_saved_before_a_setting_existed_resumes_without_it(tmp_path):
+    import json
+
+    from pilco.tasks import adaptation
+
+    new = vars(reacher.parse_args(["--output", str(tmp_path / "new")]))
+    old = {k: v for k, v in new.items()
+           if k not in ("early_start_var", "limit_cost", "fine_cost_width")}
+    run = tmp_path / "old"
+    run.mkdir()
+    (run / "progress.json").write_text(json.dumps({"args": old}))
+    resumed = reacher.parse_args(["--resume", str(run)])
+    assert (resumed.early_start_var, resumed.limit_cost, resumed.fine_cost_width) == (
+        0.0, 0.0, 0.0)
+    assert resumed.cost_width == new["cost_width"] and resumed.seed == new["seed"]
+    assert adaptation.parse_args(["--resume", str(run)]).early_start_var == 0.0
+    # a saved value wins, and so does a flag given again
+    (run / "progress.json").write_text(json.dumps({"args": new}))
+    assert reacher.parse_args(["--resume", str(run)]).early_start_var == 0.1
+    assert reacher.parse_args(["--resume", str(run), "--early-start-var", "0.2"]
+                              ).early_start_var == 0.2
 
 
 def test_the_adaptation_keeps_the_earlier_single_cost():

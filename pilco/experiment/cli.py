@@ -115,10 +115,14 @@ def _describe(values: Dict[str, Any]) -> str:
 
 
 def parse_args_with_resume(parser: argparse.ArgumentParser,
-                           argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+                           argv: Optional[Sequence[str]] = None,
+                           added_later: Optional[Dict[str, Any]] = None) -> argparse.Namespace:
     """Parse ``argv``. Precedence, lowest first: the task's defaults, ``--preset``'s
     values, the settings saved in ``DIR/progress.json`` with ``--resume DIR``, the flags
-    given (so only flags given again, e.g. ``--episodes``, change a resumed run)."""
+    given (so only flags given again, e.g. ``--episodes``, change a resumed run).
+    ``added_later``: settings the task gained after runs were saved, each with the value
+    that reproduces a run saved without it (a resumed run missing one gets that value,
+    not today's default)."""
     args = parser.parse_args(argv)
     presets = getattr(args, "_presets", {})
     saved: Dict[str, Any] = {}
@@ -128,6 +132,8 @@ def parse_args_with_resume(parser: argparse.ArgumentParser,
             parser.error(f"--resume {args.resume}: no progress.json there")
         with open(path, encoding="utf-8") as f:
             saved = json.load(f).get("args", {})
+        if saved:
+            saved = {**(added_later or {}), **saved}
     preset = args.preset if getattr(args, "preset", None) else saved.get("preset")
     if preset or saved:
         known = {a.dest for a in parser._actions}  # noqa: SLF001 - argparse has no API
@@ -166,10 +172,11 @@ non_negative_int = _number(int, lambda v: v >= 0, "at least 0")
 
 
 def parse_task_args(parser: argparse.ArgumentParser,
-                    argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+                    argv: Optional[Sequence[str]] = None,
+                    added_later: Optional[Dict[str, Any]] = None) -> argparse.Namespace:
     """A task's flags (:func:`parse_args_with_resume`), with logging set up at their
     ``--log-level``."""
-    args = parse_args_with_resume(parser, argv)
+    args = parse_args_with_resume(parser, argv, added_later)
     configure_logging(args.log_level)
     return args
 

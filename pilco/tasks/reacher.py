@@ -65,12 +65,17 @@ PAPER_SECONDS = {"interaction": 21.22, "model": 37.53, "policy": 1380.95, "total
 #: trainable noise variance is not reproduced).
 PAPER_CODE = dict(planning_horizon=100, start_var=0.1, cost_width=1.0, fine_cost_width=0.0,
                   limit_cost=0.0, policy_iters=30, policy_iters_first=60, max_data=100,
-                  joint_state="commanded", gp_priors="paper")
+                  joint_state="commanded", gp_priors="paper", early_start_var=0.0)
 
 #: The paper code's priors on every dynamics GP's hyperparameters (GPflow 1's Gamma(shape,
 #: scale)): lengthscales ~ Gamma(1, 10), signal variance ~ Gamma(1.5, 2); training is then
 #: MAP instead of maximum evidence.
 PAPER_GP_PRIORS = {"lengthscales": (1.0, 10.0), "variance": (1.5, 2.0)}
+
+#: Settings added after runs were saved, with the value that reproduces such a run on
+#: ``--resume`` (they ran without the fine and joint-limit costs and the schedule).
+ADDED_LATER = dict(fine_cost_width=0.0, limit_cost=0.0, early_cost_width=0.0,
+                   early_start_var=0.0, gp_priors="none")
 
 #: success: the last episode reaches the target within this many steps
 SUCCESS_STEPS = 15
@@ -104,7 +109,8 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
     g.add_argument("--early-cost-width", type=non_negative_float, default=0.0,
                    help="width [m] of the main cost in the first --early-episodes learned "
                         "episodes (then --cost-width again; 0: no schedule)")
-    g.add_argument("--early-start-var", type=non_negative_float, default=0.0,
+    g.add_argument("--early-start-var", type=non_negative_float,
+                   default=0.0 if damaged else 0.1,
                    help="variance of the initial state distribution in the first "
                         "--early-episodes learned episodes (then --start-var; 0: no schedule)")
     g.add_argument("--early-episodes", type=positive_int, default=1,
@@ -356,7 +362,7 @@ def figures(exp: Experiment, title: str) -> List[str]:
 def parse_args(argv: Optional[Sequence[str]] = None,
                damaged: bool = False) -> argparse.Namespace:
     """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    return parse_task_args(build_parser(damaged), argv)
+    return parse_task_args(build_parser(damaged), argv, ADDED_LATER)
 
 
 def main(argv: Optional[Sequence[str]] = None, damaged: bool = False) -> int:
