@@ -26,7 +26,12 @@ Settings the paper leaves open (chosen here, every one a flag):
   the failed seeds found joints at their limits in most stalls). Seeds 0-19 of the
   healthy reacher: see the README's "Success rates". ``0`` turns it off (the
   adaptation task's default: with it seeds 0-3 recovered 0 of 4 times).
-- ``--start-var`` 1e-4: the initial state distribution is N(start observation, 1e-4·I).
+- ``--start-var`` 1e-4: the initial state distribution is N(start observation, 1e-4·I);
+  in the first learned episode (``--early-episodes`` 1) it is ``--early-start-var`` 0.1·I
+  (healthy arm; the paper code's ``S_init`` for that episode only; damaged arm: 0, no
+  schedule): a policy optimised for a wide start distribution brings the arm near the
+  target earlier (README, "Success rates"). ``--early-cost-width`` likewise widens the
+  main cost in those episodes (off by default: no gain measured).
 - ``--policy-iters`` 25 and ``--model-iters`` 100 L-BFGS iterations, 1 restart each.
 - GP-input columns that are constant in the data (a damaged joint) get a long lengthscale
   after every model fit (:func:`ignore_constant_inputs`).
