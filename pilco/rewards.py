@@ -95,7 +95,7 @@ class AxisBumpsReward(_Reward):
     bump (``W`` with the single entry ``1 / w_k^2`` at ``[d_k, d_k]``), including its
     variance ``sum_k c_k^2 Var[bump_k]`` (covariances between bumps neglected), but
     computed for all bumps at once in a few operations instead of two solves and two
-    log-determinants per bump: e.g. the reacher's 14 joint-limit bumps.
+    log-determinants per bump: e.g. the reacher's 8 joint-limit bumps.
 
     Shapes: ``dims`` [K] integers in ``range(state_dim)``, ``t`` [K] centres, ``widths``
     [K] > 0, ``coefs`` [K] (default ones). ``t``, ``widths`` and ``coefs`` are

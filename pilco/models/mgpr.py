@@ -236,8 +236,8 @@ class MGPR(gpflow.base.Module):
         """The outputs' training losses [E] (negative log evidence, minus the log prior
         densities, plus the soft bounds of :meth:`_penalty`) as one batched computation:
         the same values as :meth:`_model_loss` of each output, but one [E, N, N] Cholesky
-        and a graph of ~1/E the operations (tracing and per-call overhead of the training
-        loss fall accordingly)."""
+        and a graph of ~1/E the operations, so tracing and compiling it take a fraction of
+        the time (an evaluation itself is not faster: benchmarks/bench_models.py)."""
         models = self.models
         X = tf.convert_to_tensor(self._X)  # [N, D]
         Y = tf.concat([tf.convert_to_tensor(y) for y in self._Y], axis=1)  # [N, E]
