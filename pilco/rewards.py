@@ -21,6 +21,7 @@ from .protocols import Reward
 from .validation import (
     check_entries,
     check_gaussian,
+    check_indices,
     check_positive_float,
     check_positive_int,
     check_reward_list,
@@ -105,18 +106,12 @@ class AxisBumpsReward(_Reward):
     def __init__(self, state_dim: int, dims, t, widths, coefs=None):
         super().__init__()
         self.state_dim = D = check_positive_int(state_dim, "state_dim")
-        if isinstance(dims, (str, bytes)):
-            raise TypeError(f"dims must be a sequence of integers, got {dims!r}")
-        dims = list(np.atleast_1d(np.asarray(dims, dtype=object)))
-        if not dims:
+        if not isinstance(dims, (str, bytes)):  # a string is refused by check_indices
+            dims = np.asarray(dims, dtype=object).reshape(-1).tolist()  # one index or many
+        self.dims = check_indices(dims, D, "dims", distinct=False)
+        if not self.dims:
             raise ValueError("dims must name at least one state dimension")
-        for d in dims:
-            if isinstance(d, (bool, np.bool_)) or not isinstance(d, (int, np.integer)):
-                raise TypeError(f"dims must hold integers, got {d!r}")
-            if not 0 <= d < D:
-                raise ValueError(f"dims: index {int(d)} is outside the state (dimension {D})")
-        K = len(dims)
-        self.dims = tuple(int(d) for d in dims)
+        K = len(self.dims)
         widths = check_entries(widths, K, "widths")
         if np.any(widths <= 0):
             raise ValueError(f"widths must be positive, got {widths}")

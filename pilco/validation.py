@@ -238,8 +238,9 @@ def check_bool(value, name: str) -> bool:
     return bool(value)
 
 
-def check_indices(indices, dim: int, name: str) -> Tuple[int, ...]:
-    """Distinct integer indices into ``range(dim)``, or a clear error."""
+def check_indices(indices, dim: int, name: str, distinct: bool = True) -> Tuple[int, ...]:
+    """Integer indices into ``range(dim)`` (distinct unless ``distinct=False``), or a clear
+    error."""
     if isinstance(indices, (str, bytes)) or not isinstance(indices, Iterable):
         raise TypeError(f"{name} must be a sequence of integers, got {indices!r}")
     out = []
@@ -249,7 +250,7 @@ def check_indices(indices, dim: int, name: str) -> Tuple[int, ...]:
         if not 0 <= a < dim:
             raise ValueError(f"{name}: index {int(a)} is outside the state (dimension {dim})")
         out.append(int(a))
-    if len(set(out)) != len(out):
+    if distinct and len(set(out)) != len(out):
         raise ValueError(f"{name} has duplicates: {out}")
     return tuple(out)
 

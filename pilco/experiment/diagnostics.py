@@ -113,14 +113,12 @@ def cost_geometry(reward) -> Optional[CostGeometry]:
         # parts with a negative weight are penalties (e.g. joint-limit bumps), ~0 at the
         # target: the geometry and the best reward are those of the positive parts
         coefs = np.asarray(reward.coefs.numpy(), dtype=np.float64)
-        positive = [(c, r) for c, r in zip(coefs, reward.base_rewards) if c > 0]
-        parts = [cost_geometry(r) for _, r in positive]
-        if not parts or any(p is None for p in parts):
+        parts = [(c, cost_geometry(r)) for c, r in zip(coefs, reward.base_rewards) if c > 0]
+        if not parts or any(p is None for _, p in parts):
             return None
-        widest = max(parts, key=lambda p: p.width)
+        widest = max((p for _, p in parts), key=lambda p: p.width)
         return dataclasses.replace(
-            widest, max_reward=float(sum(c * p.max_reward for (c, _), p in zip(positive,
-                                                                               parts))))
+            widest, max_reward=float(sum(c * p.max_reward for c, p in parts)))
     return None
 
 

@@ -60,7 +60,8 @@ from ..experiment.cli import (add_common_arguments, add_preset_argument, finish,
 
 __all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
            "ignore_constant_inputs", "limit_bumps", "set_gp_priors", "make_experiment", "figures",
-           "reached_within", "parse_args", "main", "SUCCESS_STEPS"]
+           "reached_within", "parse_args", "main", "SUCCESS_STEPS", "position_weights",
+           "main_position_reward", "schedule", "ADDED_LATER"]
 
 
 #: Paper figures of the reacher (its own machine, with a GPU).
@@ -210,11 +211,9 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray,
     from ..rewards import CombinedRewards, ExponentialReward
 
     def position_reward(D: int, width: float) -> ExponentialReward:
-        W = np.zeros((D, D))
-        W[:3, :3] = np.eye(3) / width ** 2
         t = np.zeros((1, D))
         t[0, :3] = target
-        return ExponentialReward(D, W, t)
+        return ExponentialReward(D, position_weights(D, width), t)
 
     def build(data, start_states):
         X, Y = data
@@ -274,6 +273,14 @@ def set_gp_priors(agent, args: argparse.Namespace) -> None:
                 tf.constant(shape, tf.float64), tf.constant(1.0 / scale, tf.float64))
 
 
+def position_weights(state_dim: int, width: float) -> np.ndarray:
+    """``W [D, D]`` of a saturating cost of ``width`` [m] on the gripper position (state
+    dims 0..2)."""
+    W = np.zeros((state_dim, state_dim))
+    W[:3, :3] = np.eye(3) / width ** 2
+    return W
+
+
 def main_position_reward(reward):
     """The reacher's main position cost inside its (possibly nested) combined reward:
     the first component, all the way down."""
@@ -295,10 +302,8 @@ def schedule(args: argparse.Namespace):
         early = number - args.random_episodes <= args.early_episodes
         if early_width:
             width = early_width if early else args.cost_width
-            main = main_position_reward(agent.reward)
-            W = np.zeros_like(main.W.numpy())
-            W[:3, :3] = np.eye(3) / width ** 2
-            main.W.assign(W)
+            main_position_reward(agent.reward).W.assign(
+                position_weights(agent.state_dim, width))
         if early_var:
             D = agent.state_dim
             agent.S_init = (early_var if early else args.start_var) * np.eye(D)
