@@ -81,7 +81,7 @@ PAPER_GP_PRIORS = {"lengthscales": (1.0, 10.0), "variance": (1.5, 2.0)}
 #: Settings added after runs were saved, with the value that reproduces such a run on
 #: ``--resume`` (they ran without the fine and joint-limit costs and the schedule).
 ADDED_LATER = dict(fine_cost_width=0.0, limit_cost=0.0, early_cost_width=0.0,
-                   early_start_var=0.0, gp_priors="none")
+                   early_start_var=0.0, gp_priors="none", policy_init_var=0.0)
 
 #: success: the last episode reaches the target within this many steps
 SUCCESS_STEPS = 15
@@ -121,6 +121,9 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                         "--early-episodes learned episodes (then --start-var; 0: no schedule)")
     g.add_argument("--early-episodes", type=positive_int, default=1,
                    help="learned episodes that use --early-cost-width / --early-start-var")
+    g.add_argument("--policy-init-var", type=non_negative_float, default=0.0,
+                   help="draw the initial policy's RBF centres from N(start observation, "
+                        "this·I), as the MATLAB release does (0: from N(0, I))")
     g.add_argument("--gp-priors", choices=("none", "paper"), default="none",
                    help="priors on the dynamics GPs' hyperparameters: 'paper' the paper "
                         "code's Gamma priors on lengthscales and signal variance (MAP)")
@@ -220,6 +223,8 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray,
         D, U = Y.shape[1], X.shape[1] - Y.shape[1]
         controller = RbfController(D, U, args.basis_functions, args.max_action, squash_sin,
                                    seed=args.seed)
+        if getattr(args, "policy_init_var", 0.0):
+            init_policy_near(controller, start_states[0], args.policy_init_var, args.seed)
         reward = position_reward(D, args.cost_width)
         if args.fine_cost_width:
             reward = CombinedRewards(D, [reward, position_reward(D, args.fine_cost_width)])
@@ -234,6 +239,16 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray,
         return agent
 
     return build
+
+
+def init_policy_near(controller, x0: np.ndarray, var: float, seed: int) -> None:
+    """The MATLAB release's initial policy, around ``x0 [D]``: RBF centres drawn from
+    N(x0, var·I), targets from N(0, 0.1²) (lengthscales stay 1)."""
+    rng = np.random.default_rng(seed)
+    n, D, U = controller.num_basis_functions, controller.state_dim, controller.control_dim
+    x0 = np.asarray(x0, dtype=np.float64)[None, :]
+    centers = x0 + np.sqrt(var) * rng.standard_normal((n, D))
+    controller.set_data((centers, 0.1 * rng.standard_normal((n, U))))
 
 
 def limit_bumps(state_dim: int, joint_limits: np.ndarray, width: float):
