@@ -103,6 +103,20 @@ def test_the_default_agent_has_the_limit_bumps_and_the_paper_preset_not():
     assert reward_terms(["--preset", "paper-code"])[0] == ["ExponentialReward"]
 
 
+def test_the_policy_starts_near_the_start_state_with_policy_init_var():
+    start = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])
+    near = tiny_agent(["--policy-init-var", "0.01"]).controller
+    far = tiny_agent(["--policy-init-var", "0"]).controller
+    # centres within a few std (0.1) of the start state; without the flag N(0, I)
+    offsets = near.centers.numpy() - start
+    assert near.centers.numpy().shape == (3, 10) and np.all(np.abs(offsets) < 0.5)
+    assert np.all(np.abs(near.targets.numpy()) < 0.5)
+    assert np.max(np.abs(far.centers.numpy() - start)) > 0.5
+    # the same seed gives the same policy
+    np.testing.assert_array_equal(
+        near.centers.numpy(), tiny_agent(["--policy-init-var", "0.01"]).controller.centers.numpy())
+
+
 def test_the_schedule_widens_the_main_cost_and_start_variance_early_only():
     argv = ["--early-cost-width", "1.0", "--early-start-var", "0.1", "--early-episodes", "2"]
     agent = tiny_agent(argv)
