@@ -153,9 +153,10 @@ def test_only_the_healthy_reacher_widens_its_first_learned_start_by_default():
     healthy = reacher.parse_args([])
     assert (healthy.early_start_var, healthy.early_cost_width, healthy.early_episodes) == (
         0.1, 0.0, 1)
-    assert reacher.parse_args([], damaged=True).early_start_var == 0.0
-    assert adaptation.parse_args([]).early_start_var == 0.0
-    assert reacher.parse_args(["--preset", "paper-code"]).early_start_var == 0.0
+    assert healthy.policy_init_var == 0.1
+    for other in (reacher.parse_args([], damaged=True), adaptation.parse_args([]),
+                  reacher.parse_args(["--preset", "paper-code"])):
+        assert (other.early_start_var, other.policy_init_var) == (0.0, 0.0)
     agent = tiny_agent([])
     hook = reacher.schedule(healthy)
     hook(agent, 2)
@@ -171,13 +172,13 @@ def test_a_run_saved_before_a_setting_existed_resumes_without_it(tmp_path):
 
     new = vars(reacher.parse_args(["--output", str(tmp_path / "new")]))
     old = {k: v for k, v in new.items()
-           if k not in ("early_start_var", "limit_cost", "fine_cost_width")}
+           if k not in ("early_start_var", "limit_cost", "fine_cost_width", "policy_init_var")}
     run = tmp_path / "old"
     run.mkdir()
     (run / "progress.json").write_text(json.dumps({"args": old}))
     resumed = reacher.parse_args(["--resume", str(run)])
-    assert (resumed.early_start_var, resumed.limit_cost, resumed.fine_cost_width) == (
-        0.0, 0.0, 0.0)
+    assert (resumed.early_start_var, resumed.limit_cost, resumed.fine_cost_width,
+            resumed.policy_init_var) == (0.0, 0.0, 0.0, 0.0)
     assert resumed.cost_width == new["cost_width"] and resumed.seed == new["seed"]
     assert adaptation.parse_args(["--resume", str(run)]).early_start_var == 0.0
     # a saved value wins, and so does a flag given again
