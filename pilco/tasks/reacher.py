@@ -32,7 +32,8 @@ Settings the paper leaves open (chosen here, every one a flag):
   schedule): a policy optimised for a wide start distribution brings the arm near the
   target earlier (README, "Success rates"). ``--early-cost-width`` likewise widens the
   main cost in those episodes (off by default: no gain measured).
-- ``--policy-init-var`` 0.1 (healthy arm; damaged arm: 0): the initial policy's 50 RBF
+- ``--policy-init-var`` 0.1 (healthy arm; damaged arm, adaptation, paper-code preset:
+  0): the initial policy's 50 RBF
   centres are drawn from N(start observation, 0.1·I), targets from N(0, 0.1²), as the
   MATLAB release initialises its policies (:func:`init_policy_near`); 0 draws the
   centres from N(0, I), which puts most of them far from the arm's states (its joint
@@ -85,7 +86,8 @@ PAPER_CODE = dict(planning_horizon=100, start_var=0.1, cost_width=1.0, fine_cost
 PAPER_GP_PRIORS = {"lengthscales": (1.0, 10.0), "variance": (1.5, 2.0)}
 
 #: Settings added after runs were saved, with the value that reproduces such a run on
-#: ``--resume`` (they ran without the fine and joint-limit costs and the schedule).
+#: ``--resume`` (they ran without the fine and joint-limit costs and the schedule, with
+#: policy centres from N(0, I)).
 ADDED_LATER = dict(fine_cost_width=0.0, limit_cost=0.0, early_cost_width=0.0,
                    early_start_var=0.0, gp_priors="none", policy_init_var=0.0)
 
