@@ -33,11 +33,11 @@ Settings the paper leaves open (chosen here, every one a flag):
   target earlier (README, "Success rates"). ``--early-cost-width`` likewise widens the
   main cost in those episodes (off by default: no gain measured).
 - ``--policy-init-var`` 0.1 (healthy arm; damaged arm, adaptation, paper-code preset:
-  0): the initial policy's 50 RBF
-  centres are drawn from N(start observation, 0.1·I), targets from N(0, 0.1²), as the
-  MATLAB release initialises its policies (:func:`init_policy_near`); 0 draws the
-  centres from N(0, I), which puts most of them far from the arm's states (its joint
-  angles start at -1 and 2 rad). Seeds 0-19: 20/20 with it, 17/20 without (README).
+  0): the initial policy's 50 RBF centres are drawn from N(start observation, 0.1·I),
+  targets from N(0, 0.1²), as the MATLAB release initialises its policies
+  (:func:`init_policy_near`); 0 draws the centres from N(0, I), which puts most of them
+  far from the arm's states (its joint angles start at -1 and 2 rad). Seeds 0-19: 20/20
+  with it, 17/20 without (README).
 - ``--policy-iters`` 25 and ``--model-iters`` 100 L-BFGS iterations, 1 restart each.
 - GP-input columns that are constant in the data (a damaged joint) get a long lengthscale
   after every model fit (:func:`ignore_constant_inputs`).
