@@ -27,9 +27,11 @@ from .validation import (
     check_gaussian,
     check_matrix,
     check_max_action,
+    check_non_negative_float,
     check_pair,
     check_positive_int,
     check_squash,
+    check_state_row,
 )
 
 __all__ = ["squash_sin", "squash_sat", "LinearController", "RbfController"]
@@ -229,6 +231,30 @@ class RbfController(_SquashedController):
 
     def _unsquashed(self, m, s, prepared: gp_moments.Predictor):
         return gp_moments.predict(m, s, prepared)
+
+    def place_near(self, mean, std: float, seed: Optional[int] = None,
+                   features: Optional[Callable[[np.ndarray], np.ndarray]] = None,
+                   target_std: float = 0.1) -> None:
+        """Start the policy around a state distribution, as the MATLAB release initialises
+        its policies: centres ``features(mean + std·z)``, ``z ~ N(0, I)`` of shape [n, d],
+        targets ``target_std·N(0, 1)`` [n, U] (drawn after the centres from the same
+        generator); lengthscales stay as they are.
+
+        ``mean`` [d] is a state (d = ``state_dim``), or, with ``features`` (a map from
+        [n, d] states to [n, state_dim] policy inputs, e.g. an angle to its sine and
+        cosine), a state of the features' domain.
+        """
+        if features is not None and not callable(features):
+            raise TypeError(f"features must be callable, got {type(features).__name__}")
+        dim = self.state_dim if features is None else int(np.size(mean))
+        mean = check_state_row(mean, dim, "mean")[0]
+        std = check_non_negative_float(std, "std")
+        target_std = check_non_negative_float(target_std, "target_std")
+        rng = generator(seed)
+        states = mean[None, :] + std * rng.standard_normal((self.num_basis_functions, mean.size))
+        centers = states if features is None else features(states)
+        targets = target_std * rng.standard_normal((self.num_basis_functions, self.control_dim))
+        self.set_data((centers, targets))
 
     def randomize(self, scale: float = 1.0, seed: Optional[int] = None):
         """Draw fresh centers ~ N(0, scale^2), targets ~ N(0, 0.1^2), lengthscales ~ 1."""

@@ -208,6 +208,16 @@ def check_positive_float(value, name: str) -> float:
     return value
 
 
+def check_non_negative_float(value, name: str) -> float:
+    """A finite number >= 0 (not a boolean or a string), or a clear error."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.number)):
+        raise TypeError(f"{name} must be a number >= 0, got {value!r}")
+    value = float(value)
+    if not np.isfinite(value) or value < 0:
+        raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+    return value
+
+
 def check_min_rel_improvement(value, name: str = "min_rel_improvement") -> Optional[float]:
     """``None`` or a finite number >= 0 (an optimiser's early-stop bar), or a clear error."""
     if value is None:

@@ -68,16 +68,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def policy_input(states: np.ndarray) -> np.ndarray:
+    """``[x, dx, dtheta, theta]`` [n, 4] -> the policy's input ``[x, dx, dtheta, sin theta,
+    cos theta]`` [n, 5]."""
+    return np.column_stack([states[:, :3], np.sin(states[:, 3]), np.cos(states[:, 3])])
+
+
 def init_policy_from_start(controller, start_std: float, seed: int) -> None:
     """The MATLAB release's initial policy: centres drawn from the start distribution
     N(0, start_std² I) of ``[x, dx, dtheta, theta]`` (policy input ``[x, dx, dtheta,
     sin theta, cos theta]``), targets 0.1·N(0, 1), lengthscales (1, 1, 1, 0.7, 0.7)."""
-    n = controller.num_basis_functions
-    rng = np.random.default_rng(seed)
-    x0 = start_std * rng.standard_normal((n, 4))
-    centers = np.column_stack([x0[:, :3], np.sin(x0[:, 3]), np.cos(x0[:, 3])])
-    targets = 0.1 * rng.standard_normal((n, 1))
-    controller.set_data((centers, targets))
+    controller.place_near(np.zeros(4), start_std, seed=seed, features=policy_input)
     controller.models[0].kernel.lengthscales.assign([1.0, 1.0, 1.0, 0.7, 0.7])
 
 

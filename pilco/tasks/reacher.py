@@ -252,12 +252,9 @@ def agent_builder(args: argparse.Namespace, target: np.ndarray,
 
 def init_policy_near(controller, x0: np.ndarray, var: float, seed: int) -> None:
     """The MATLAB release's initial policy, around ``x0 [D]``: RBF centres drawn from
-    N(x0, var·I), targets from N(0, 0.1²) (lengthscales stay 1)."""
-    rng = np.random.default_rng(seed)
-    n, D, U = controller.num_basis_functions, controller.state_dim, controller.control_dim
-    x0 = np.asarray(x0, dtype=np.float64)[None, :]
-    centers = x0 + np.sqrt(var) * rng.standard_normal((n, D))
-    controller.set_data((centers, 0.1 * rng.standard_normal((n, U))))
+    N(x0, var·I), targets from N(0, 0.1²) (lengthscales stay 1); see
+    :meth:`pilco.controllers.RbfController.place_near`."""
+    controller.place_near(x0, np.sqrt(var), seed=seed)
 
 
 def limit_bumps(state_dim: int, joint_limits: np.ndarray, width: float):
