@@ -30,6 +30,7 @@ from ..experiment import Experiment, ExperimentConfig
 from ..experiment.cli import (add_common_arguments, finish, learning_settings,
                               non_negative_float, open_experiment, parse_task_args,
                               positive_float, positive_int)
+from ..features import angle_features
 
 __all__ = ["build_parser", "init_policy_from_start", "agent_builder", "make_config",
            "make_experiment", "figures", "main"]
@@ -68,17 +69,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def policy_input(states: np.ndarray) -> np.ndarray:
-    """``[x, dx, dtheta, theta]`` [n, 4] -> the policy's input ``[x, dx, dtheta, sin theta,
-    cos theta]`` [n, 5]."""
-    return np.column_stack([states[:, :3], np.sin(states[:, 3]), np.cos(states[:, 3])])
-
-
 def init_policy_from_start(controller, start_std: float, seed: int) -> None:
     """The MATLAB release's initial policy: centres drawn from the start distribution
     N(0, start_std² I) of ``[x, dx, dtheta, theta]`` (policy input ``[x, dx, dtheta,
     sin theta, cos theta]``), targets 0.1·N(0, 1), lengthscales (1, 1, 1, 0.7, 0.7)."""
-    controller.place_near(np.zeros(4), start_std, seed=seed, features=policy_input)
+    controller.place_near(np.zeros(4), start_std, seed=seed,
+                          features=lambda states: angle_features(states, [3]))
     controller.models[0].kernel.lengthscales.assign([1.0, 1.0, 1.0, 0.7, 0.7])
 
 
