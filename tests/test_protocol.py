@@ -131,6 +131,36 @@ def test_replacing_components_is_checked():
         agent.controller = AffineController(3, U)
 
 
+
+def test_replaced_components_are_used_after_compiling():
+    """Setting the reward or the controller after the compiled rollout was traced (by a
+    prediction, an optimisation or an action) must change what it computes: the agent then
+    agrees with one built with the new components."""
+    data = transitions()
+    rbf = RbfController(D, U, 4, seed=0)
+    near, far = ExponentialReward(D), ExponentialReward(D, t=np.ones((1, D)))
+    agent = PILCO(data, rbf, near, horizon=4)
+    agent.optimize_policy(maxiter=2)
+    agent.compute_action(np.zeros(D))
+    before = agent.expected_return()
+    agent.reward = far
+    fresh = PILCO(data, rbf, far, horizon=4)
+    assert agent.expected_return() == pytest.approx(fresh.expected_return(), rel=1e-12)
+    assert abs(agent.expected_return() - before) > 1e-3
+    np.testing.assert_allclose(agent.predict_trajectory_with_rewards()[2],
+                               fresh.predict_trajectory_with_rewards()[2], rtol=1e-12)
+    start = fresh.expected_return()
+    best = agent.optimize_policy(maxiter=3)  # the objective is the new reward's
+    assert best == pytest.approx(agent.expected_return(), rel=1e-9)
+    assert best >= start
+
+    other = RbfController(D, U, 4, seed=1)
+    agent.controller = other
+    fresh = PILCO(data, other, far, horizon=4)
+    x = np.full((1, D), 0.3)
+    np.testing.assert_allclose(agent.compute_action(x), fresh.compute_action(x), rtol=1e-12)
+    assert agent.expected_return() == pytest.approx(fresh.expected_return(), rel=1e-12)
+
 def test_one_step_prediction_is_the_gp_prediction_plus_noise():
     X, Y = transitions()
     X[:, 0] = np.angle(np.exp(1j * X[:, 0]))

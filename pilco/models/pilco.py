@@ -111,6 +111,7 @@ class PILCO(gpflow.base.Module):
     def controller(self, value):
         self._rollout.controller = check_controller(value, self.feature_dim, self.control_dim,
                                                     self.state_dim)
+        self._policy_optimizer = GuardedScipy()  # its compiled objective saw the old one
 
     @property
     def reward(self):
@@ -120,6 +121,7 @@ class PILCO(gpflow.base.Module):
     @reward.setter
     def reward(self, value):
         self._rollout.reward = check_reward(value, self.state_dim)
+        self._policy_optimizer = GuardedScipy()  # its compiled objective saw the old one
 
     @property
     def horizon(self) -> int:

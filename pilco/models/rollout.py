@@ -49,8 +49,8 @@ class Rollout(gpflow.base.Module):
         self.horizon = tf.Variable(horizon, trainable=False, dtype=tf.int32, name="horizon")
         self.m_init = tf.Variable(m_init, trainable=False, name="m_init")
         self.S_init = tf.Variable(S_init, trainable=False, name="S_init")
-        self.controller = controller
-        self.reward = reward
+        self._controller = controller
+        self._reward = reward
         self.state_dim = D = state_dim
         self.angle_indices = tuple(angle_indices)
         self.policy_input_noise = policy_input_noise
@@ -66,6 +66,34 @@ class Rollout(gpflow.base.Module):
         self._lengthscales = tf.Variable(tf.ones([D, inputs], f), trainable=False)
         self._signal_variance = tf.Variable(tf.ones([D], f), trainable=False)
         self._noise_variance = tf.Variable(tf.ones([D], f), trainable=False)
+        self._compile()
+
+    def _compile(self) -> None:
+        """(Re)create the compiled functions. A trace captures the controller and the
+        reward it was traced with, so replacing either must drop the old traces."""
+        self.total_reward = tf.function(self._total_reward, autograph=False)
+        self.trajectory = tf.function(self._trajectory, autograph=False)
+        self.action = tf.function(self._action, autograph=False)
+
+    @property
+    def controller(self) -> Controller:
+        """The policy; setting it drops the compiled traces of the previous one."""
+        return self._controller
+
+    @controller.setter
+    def controller(self, value: Controller) -> None:
+        self._controller = value
+        self._compile()
+
+    @property
+    def reward(self) -> Reward:
+        """The reward; setting it drops the compiled traces of the previous one."""
+        return self._reward
+
+    @reward.setter
+    def reward(self, value: Reward) -> None:
+        self._reward = value
+        self._compile()
 
     def refresh(self, dynamics_model) -> None:
         """Factorise ``dynamics_model`` (an :class:`MGPR`) for the compiled functions."""
@@ -114,8 +142,7 @@ class Rollout(gpflow.base.Module):
         s_next = s + Sd + cov_xd + tf.transpose(cov_xd)
         return m_next, 0.5 * (s_next + tf.transpose(s_next))
 
-    @tf.function(autograph=False)
-    def total_reward(self, m0, s0, horizon):
+    def _total_reward(self, m0, s0, horizon):
         """Sum of expected rewards of steps 1..H and the final state, in one graph.
 
         Shapes: m0 [1, D], s0 [D, D], horizon scalar int32 -> m_H [1, D], s_H [D, D],
@@ -147,8 +174,7 @@ class Rollout(gpflow.base.Module):
         )
         return -total[0, 0]
 
-    @tf.function(autograph=False)
-    def trajectory(self, m0, s0, horizon):
+    def _trajectory(self, m0, s0, horizon):
         """States 0..H and their reward moments: M [H+1, D], S [H+1, D, D], R, Rv [H+1]."""
         dynamics = self.dynamics()
         prepared = self.controller.prepare()
@@ -171,8 +197,7 @@ class Rollout(gpflow.base.Module):
         )
         return tuple(a.stack() for a in out[3:])
 
-    @tf.function(autograph=False)
-    def action(self, x):
+    def _action(self, x):
         """The policy's action at a known state (zero covariance): x [1, D] -> u [1, U]."""
         f = default_float()
         D = self.state_dim
