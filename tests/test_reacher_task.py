@@ -196,6 +196,34 @@ def test_the_adaptation_keeps_the_earlier_single_cost():
     assert adaptation.parse_args(["--limit-cost", "0.1"]).limit_cost == 0.1
 
 
+@pytest.mark.parametrize("which", ["all", "main"])
+def test_the_adaptation_can_keep_only_the_main_cost_after_the_damage(which):
+    pytest.importorskip("mujoco")
+    from types import SimpleNamespace
+
+    from pilco.envs import FETCH_ID
+    from pilco.experiment import make_env
+    from pilco.tasks import adaptation
+
+    healthy = ["--fine-cost-width", "0.05", "--limit-cost", "0.1"]
+    args = adaptation.parse_args([*healthy, "--damaged-cost", which])
+    agent = tiny_agent(healthy)
+    combined, main = agent.reward, reacher.main_position_reward(agent.reward)
+    before = agent.expected_return()
+    exp = SimpleNamespace(agent=agent, episodes=[], episode_seed=lambda n: n,
+                          make_env=lambda: make_env(FETCH_ID, reacher.env_kwargs(args, False)))
+    adaptation.damage(exp, args)
+    assert agent.m_init.shape == (1, 10) and agent.m_init[0, 0] != 1.0  # the arm's start
+    if which == "all":
+        assert agent.reward is combined
+    else:
+        assert agent.reward is main and type(main).__name__ == "ExponentialReward"
+        np.testing.assert_allclose(main.W.numpy(), reacher.position_weights(10, 0.2))
+        agent.m_init = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
+        assert abs(agent.expected_return() - before) > 1e-6  # the objective changed
+    assert adaptation.parse_args([]).damaged_cost == "all"
+
+
 def priors_of(agent):
     """``[(lengthscale prior, variance prior)]`` per output GP, as (shape, scale) or None."""
     def shape_scale(p):

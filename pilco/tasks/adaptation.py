@@ -7,8 +7,9 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
    told; by default the elbow is stuck at its angle, ``--damage-mode zero`` straightens
    it); the damaged arm's start state becomes the agent's ``m_init``;
 3. up to ``--damaged-episodes`` learned episodes with the same agent, policy and data
-   (``--drop-old-data``: the model then learns from the damaged episodes only), stopping
-   once it reaches again (unless ``--no-stop-when-recovered``).
+   (``--drop-old-data``: the model then learns from the damaged episodes only;
+   ``--damaged-cost main``: the policy then optimises the main position cost only),
+   stopping once it reaches again (unless ``--no-stop-when-recovered``).
 
 The summary adds ``damage_at_episode`` (first episode on the damaged arm) and
 ``episodes_to_recover`` (damaged episodes until one reaches, counting that one; null if
@@ -25,10 +26,13 @@ from ..experiment.cli import finish, non_negative_int, parse_task_args, positive
 from . import reacher
 
 __all__ = ["build_parser", "parse_args", "make_experiment", "damage", "run", "figures",
-           "main", "RECOVER_WITHIN"]
+           "main", "RECOVER_WITHIN", "ADDED_LATER"]
 
 #: success: the damaged arm reaches again within this many damaged episodes
 RECOVER_WITHIN = 3
+
+#: settings added after runs were saved, with the value that reproduces such a run
+ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,6 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="at most this many learned episodes before the damage")
     g.add_argument("--damaged-episodes", type=positive_int, default=4,
                    help="at most this many learned episodes after it")
+    g.add_argument("--damaged-cost", choices=("all", "main"), default="all",
+                   help="after the damage keep every cost term ('all') or only the main "
+                        "position cost ('main': without --fine-cost-width and --limit-cost)")
     for name, text in (("--drop-old-data", "after the damage, learn the model from damaged "
                                            "episodes only"),
                        ("--no-stop-when-recovered", "run all --damaged-episodes even after "
@@ -64,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    args = parse_task_args(build_parser(), argv, reacher.ADDED_LATER)
+    args = parse_task_args(build_parser(), argv, ADDED_LATER)
     args.episodes = args.random_episodes + args.healthy_episodes + args.damaged_episodes
     return args
 
@@ -89,11 +96,14 @@ def make_experiment(args: argparse.Namespace) -> Experiment:
 
 
 def damage(exp: Experiment, args: argparse.Namespace) -> None:
-    """Break the arm's joints; the agent's ``m_init`` becomes the damaged start state."""
+    """Break the arm's joints; the agent's ``m_init`` becomes the damaged start state and,
+    with ``--damaged-cost main``, its reward the main position cost alone."""
     env = exp.make_env()
     env.unwrapped.damage(tuple(args.damaged_joints), args.damage_mode)
     obs, _ = env.reset(seed=exp.episode_seed(len(exp.episodes) + 1))
     exp.agent.m_init = obs[None, :]  # the damaged arm may start elsewhere
+    if args.damaged_cost == "main":
+        exp.agent.reward = reacher.main_position_reward(exp.agent.reward)
 
 
 def _learned_solved(exp: Experiment) -> bool:
