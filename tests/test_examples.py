@@ -69,7 +69,8 @@ def runs(tmp_path_factory):
             "adaptation": ("adaptation.py", ["--horizon", "6", "--basis-functions", "3",
                                              "--policy-iters", "2", "--model-iters", "10",
                                              "--quiet", "--no-render", "--healthy-episodes",
-                                             "1", "--damaged-episodes", "1"]),
+                                             "2", "--min-healthy-episodes", "2",
+                                             "--damaged-episodes", "1"]),
         })
     started = {name: (base / name, _start(script, base / name, args))
                for name, (script, args) in procs.items()}
@@ -206,8 +207,8 @@ def test_adaptation(runs):
     pytest.importorskip("mujoco")
     d, out = _ok(runs["adaptation"])
     s = _load_summary(d)
-    _check_summary(s, "adaptation", 3, extra=("damage_at_episode", "episodes_to_recover"))
-    assert s["damage_at_episode"] == 3
+    _check_summary(s, "adaptation", 4, extra=("damage_at_episode", "episodes_to_recover"))
+    assert s["damage_at_episode"] == 4  # both healthy episodes ran, reached or not
     assert s["episodes_to_recover"] is None or s["episodes_to_recover"] == 1
     assert s["success"] == (s["episodes_to_recover"] is not None) and s["complete"] is True
     _check_data(d, s, 10, 7)

@@ -196,6 +196,43 @@ def test_the_adaptation_keeps_the_earlier_single_cost():
     assert adaptation.parse_args(["--limit-cost", "0.1"]).limit_cost == 0.1
 
 
+class _HealthyRun:
+    """The part of an Experiment that the adaptation's healthy phase uses; learned
+    episode k (1-based) reaches the target when k is in ``reaching``."""
+
+    def __init__(self, reaching, done=0):
+        self.reaching = set(reaching)
+        self.records, self.episodes = [{"random": True}], ["random"]
+        for _ in range(done):
+            self.run_learned_episode()
+
+    def run_learned_episode(self):
+        self.records.append({"random": False})
+        self.episodes.append(len(self.records) - 1)  # the learned episode's number
+
+    def episode_solved(self, episode):
+        return episode != "random" and episode in self.reaching
+
+
+@pytest.mark.parametrize("flags, reaching, done, learned", [
+    ([], {1}, 0, 1),  # stop at the first episode that reached
+    ([], {3}, 0, 3),
+    ([], set(), 0, 4),  # never reached: every healthy episode
+    (["--min-healthy-episodes", "3"], {1}, 0, 3),  # reached early, more data anyway
+    (["--min-healthy-episodes", "3"], {4}, 0, 4),
+    (["--min-healthy-episodes", "3"], {1}, 2, 3),  # resumed after two: one more
+    (["--min-healthy-episodes", "6"], {1}, 0, 4),  # capped by --healthy-episodes
+    (["--healthy-episodes", "0"], set(), 0, 0),
+])
+def test_the_adaptation_damages_the_arm_after_its_healthy_episodes(flags, reaching, done,
+                                                                   learned):
+    from pilco.tasks import adaptation
+
+    run = _HealthyRun(reaching, done)
+    adaptation.run_healthy(run, adaptation.parse_args(flags))
+    assert len(run.records) - 1 == learned
+
+
 @pytest.mark.parametrize("which", ["all", "main"])
 def test_the_adaptation_can_keep_only_the_main_cost_after_the_damage(which):
     pytest.importorskip("mujoco")

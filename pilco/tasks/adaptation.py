@@ -2,7 +2,8 @@
 mid-run and keep learning with the same agent (the paper's motivation, §5.2).
 
 1. the random episodes and up to ``--healthy-episodes`` learned episodes on the healthy
-   arm, stopping as soon as an episode reaches the target;
+   arm, stopping as soon as an episode has reached the target and at least
+   ``--min-healthy-episodes`` were run;
 2. :func:`damage`: ``env.damage(--damaged-joints, --damage-mode)`` (the policy is not
    told; by default the elbow is stuck at its angle, ``--damage-mode zero`` straightens
    it); the damaged arm's start state becomes the agent's ``m_init``;
@@ -25,14 +26,15 @@ from ..experiment import Experiment
 from ..experiment.cli import finish, non_negative_int, parse_task_args, positive_int
 from . import reacher
 
-__all__ = ["build_parser", "parse_args", "make_experiment", "damage", "run", "figures",
+__all__ = ["build_parser", "parse_args", "make_experiment", "damage", "run_healthy", "run",
+           "figures",
            "main", "RECOVER_WITHIN", "ADDED_LATER"]
 
 #: success: the damaged arm reaches again within this many damaged episodes
 RECOVER_WITHIN = 3
 
 #: settings added after runs were saved, with the value that reproduces such a run
-ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all")
+ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all", min_healthy_episodes=1)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -56,6 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
     g = parser.add_argument_group("adaptation")
     g.add_argument("--healthy-episodes", type=non_negative_int, default=4,
                    help="at most this many learned episodes before the damage")
+    g.add_argument("--min-healthy-episodes", type=positive_int, default=1,
+                   help="learned episodes on the healthy arm before the damage even when "
+                        "an earlier one reached (more healthy data for the model; at most "
+                        "--healthy-episodes)")
     g.add_argument("--damaged-episodes", type=positive_int, default=4,
                    help="at most this many learned episodes after it")
     g.add_argument("--damaged-cost", choices=("all", "main"), default="all",
@@ -120,6 +126,19 @@ def _recovered_after(exp: Experiment, first: int) -> Optional[int]:
     return None
 
 
+def run_healthy(exp: Experiment, args: argparse.Namespace) -> None:
+    """Learned episodes on the healthy arm until one has reached the target and at least
+    ``--min-healthy-episodes`` ran, at most ``--healthy-episodes`` (a resumed run's
+    episodes count)."""
+    healthy = sum(not r["random"] for r in exp.records)
+    solved = _learned_solved(exp)
+    while healthy < args.healthy_episodes and (
+            not solved or healthy < args.min_healthy_episodes):
+        exp.run_learned_episode()
+        healthy += 1
+        solved = solved or exp.episode_solved(exp.episodes[-1])
+
+
 def run(exp: Experiment, args: argparse.Namespace) -> Dict[str, Any]:
     """Healthy episodes until one reaches, the damage, damaged episodes until the arm
     reaches again (or their budget is spent); resumable at any episode."""
@@ -129,12 +148,7 @@ def run(exp: Experiment, args: argparse.Namespace) -> Dict[str, Any]:
         while len(exp.episodes) < args.random_episodes:
             exp.run_random_episode()
         if fields["damage_at_episode"] is None:
-            healthy = sum(not r["random"] for r in exp.records)
-            solved = _learned_solved(exp)
-            while healthy < args.healthy_episodes and not solved:
-                exp.run_learned_episode()
-                healthy += 1
-                solved = exp.episode_solved(exp.episodes[-1])
+            run_healthy(exp, args)
             damage(exp, args)
             fields["damage_at_episode"] = len(exp.episodes) + 1
             if args.drop_old_data:
