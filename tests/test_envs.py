@@ -390,6 +390,25 @@ def test_fetch_stuck_mode_and_runtime_damage(fetch_cls):
     assert env.damaged_joints == ()
 
 
+def test_damage_flag_tells_when_the_arm_broke(fetch_cls):
+    env = penvs.DamageFlag(fetch_cls())
+    assert env.observation_space.shape == (11,)
+    obs, _ = env.reset(seed=0)
+    plain = env.unwrapped._obs()
+    np.testing.assert_array_equal(obs, np.append(plain, 0.0))
+    assert env.observation_space.contains(obs)
+    obs, *_ = env.step(np.full(7, 0.05))
+    assert obs[-1] == 0.0
+    env.unwrapped.damage("elbow_flex", mode="stuck")
+    obs, *_ = env.step(np.full(7, 0.05))
+    assert obs[-1] == 1.0 and obs.shape == (11,)
+    assert env.reset(seed=1)[0][-1] == 1.0
+    env.unwrapped.repair()
+    assert env.reset(seed=1)[0][-1] == 0.0
+    with pytest.raises(TypeError, match="Fetch reacher"):
+        penvs.DamageFlag(CartPoleSwingUp())
+
+
 def test_fetch_unknown_joint_and_bad_input(fetch_cls):
     with pytest.raises(ValueError, match="elbow_flex"):  # message lists valid names
         fetch_cls(damaged_joints=("knee",))

@@ -233,6 +233,32 @@ def test_the_adaptation_damages_the_arm_after_its_healthy_episodes(flags, reachi
     assert len(run.records) - 1 == learned
 
 
+def test_the_damage_flag_gets_a_learnable_lengthscale_once_damaged_data_arrive():
+    from pilco.tasks import adaptation
+
+    rng = np.random.default_rng(0)
+    X, Y = rng.normal(size=(12, 18)), 0.01 * rng.normal(size=(12, 11))
+    X[:, 10] = 0.0  # the flag: healthy transitions only
+    args = reacher.parse_args(["--basis-functions", "3"])
+    agent = reacher.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
+        (X, Y), np.append(X[0, :10], 0.0)[None, :])
+
+    def flag_lengthscales():
+        return np.array([m.kernel.lengthscales.numpy()[10] for m in agent.mgpr.models])
+
+    np.testing.assert_allclose(flag_lengthscales(), 100.0, rtol=1e-12)  # constant: ignored
+    adaptation.learn_the_flag(agent)
+    agent.set_data((X, Y))
+    np.testing.assert_allclose(flag_lengthscales(), 100.0, rtol=1e-12)
+    damaged = X.copy()
+    damaged[8:, 10] = 1.0
+    agent.set_data((damaged, Y))
+    np.testing.assert_allclose(flag_lengthscales(), 1.0, rtol=1e-12)
+    agent.mgpr.models[0].kernel.lengthscales.assign(np.full(18, 3.0))  # as if trained
+    agent.set_data((damaged, Y))
+    assert flag_lengthscales()[0] == pytest.approx(3.0, rel=1e-12)
+
+
 @pytest.mark.parametrize("which", ["all", "main"])
 def test_the_adaptation_can_keep_only_the_main_cost_after_the_damage(which):
     pytest.importorskip("mujoco")

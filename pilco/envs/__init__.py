@@ -29,6 +29,7 @@ import logging
 import gymnasium
 
 from pilco.envs.cartpole import CartPoleSwingUp
+from pilco.envs.fetch_damage import DamageFlag
 from pilco.envs.fetch_reach_bound import ReachBound, fewest_steps
 from pilco.envs.fetch_reacher import ARM_JOINTS, FetchJointReacher
 from pilco.envs.pendulum import PendulumSwingUp
@@ -39,6 +40,7 @@ __all__ = [
     "ARM_JOINTS",
     "CARTPOLE_ID",
     "CartPoleSwingUp",
+    "DamageFlag",
     "FETCH_DAMAGED_ID",
     "FETCH_ID",
     "FetchJointReacher",

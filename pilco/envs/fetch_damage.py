@@ -1,6 +1,7 @@
 """Damaged joints of the Fetch arm: which joints, how they fail, what they are forced to.
 
-Modes (the agent is not told; the observation keeps its form):
+Modes (the agent is not told; the observation keeps its form, unless the env is wrapped
+in :class:`DamageFlag`):
 
 - ``"zero"``: the joints are forced to 0 rad at reset and at every step whatever the
   command;
@@ -14,12 +15,13 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium
 import numpy as np
 
 from pilco.envs import _checks as check
 from pilco.envs.fetch_model import SHORT_NAMES, resolve_joints
 
-__all__ = ["DAMAGE_MODES", "JointDamage"]
+__all__ = ["DAMAGE_MODES", "JointDamage", "DamageFlag"]
 
 DAMAGE_MODES = ("zero", "zero_on_step", "stuck")
 
@@ -73,3 +75,22 @@ class JointDamage:
     def at_step(self, q: np.ndarray) -> np.ndarray:
         """Commanded angles ``q`` (7,) of a step after the damage (in place)."""
         return self._force(q)
+
+
+class DamageFlag(gymnasium.ObservationWrapper):
+    """Appends 1.0 to the observation of a Fetch reacher env while any of its joints is
+    damaged, 0.0 otherwise: observation ``(10,) -> (11,)``. It tells an agent when the
+    arm broke, not which joint or how."""
+
+    def __init__(self, env: gymnasium.Env) -> None:
+        super().__init__(env)
+        if not hasattr(env.unwrapped, "damaged_joints"):
+            raise TypeError(f"DamageFlag needs a Fetch reacher env (with damaged_joints); "
+                            f"got {type(env.unwrapped).__name__}")
+        space = env.observation_space
+        self.observation_space = gymnasium.spaces.Box(
+            np.append(space.low, 0.0), np.append(space.high, 1.0), dtype=np.float64)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        broken = bool(self.env.unwrapped.damaged_joints)
+        return np.append(observation, 1.0 if broken else 0.0)

@@ -26,15 +26,16 @@ from ..experiment import Experiment
 from ..experiment.cli import finish, non_negative_int, parse_task_args, positive_int
 from . import reacher
 
-__all__ = ["build_parser", "parse_args", "make_experiment", "damage", "run_healthy", "run",
-           "figures",
+__all__ = ["build_parser", "parse_args", "make_experiment", "damage", "learn_the_flag",
+           "run_healthy", "run", "figures",
            "main", "RECOVER_WITHIN", "ADDED_LATER"]
 
 #: success: the damaged arm reaches again within this many damaged episodes
 RECOVER_WITHIN = 3
 
 #: settings added after runs were saved, with the value that reproduces such a run
-ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all", min_healthy_episodes=1)
+ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all", min_healthy_episodes=1,
+                   damage_input=False)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -67,6 +68,11 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--damaged-cost", choices=("all", "main"), default="all",
                    help="after the damage keep every cost term ('all') or only the main "
                         "position cost ('main': without --fine-cost-width and --limit-cost)")
+    g.add_argument("--damage-input", action="store_true",
+                   help="tell the agent when the arm broke: the state gains a last "
+                        "dimension, 0 before the damage and 1 after, so that the dynamics "
+                        "GPs can learn how far the damaged arm's transitions follow the "
+                        "healthy arm's (not which joint broke)")
     for name, text in (("--drop-old-data", "after the damage, learn the model from damaged "
                                            "episodes only"),
                        ("--no-stop-when-recovered", "run all --damaged-episodes even after "
@@ -92,10 +98,17 @@ def recovered_within(episodes: int):
     return success
 
 
+def _damage_flag(env):
+    from ..envs import DamageFlag
+
+    return DamageFlag(env)
+
+
 def make_experiment(args: argparse.Namespace) -> Experiment:
     """The healthy reacher's run (new or resumed), with the adaptation's summary fields."""
     exp = reacher.make_experiment(args, "adaptation", damaged=False,
-                                  success_fn=recovered_within(RECOVER_WITHIN))
+                                  success_fn=recovered_within(RECOVER_WITHIN),
+                                  wrap_env=_damage_flag if args.damage_input else None)
     exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None,
                           **exp.summary_fields}
     return exp
@@ -110,6 +123,31 @@ def damage(exp: Experiment, args: argparse.Namespace) -> None:
     exp.agent.m_init = obs[None, :]  # the damaged arm may start elsewhere
     if args.damaged_cost == "main":
         exp.agent.reward = reacher.main_position_reward(exp.agent.reward)
+    if args.damage_input:
+        learn_the_flag(exp.agent, ignored=args.constant_input_lengthscale)
+
+
+def learn_the_flag(agent, lengthscale: float = 1.0, ignored: float = 100.0) -> None:
+    """With ``--damage-input``: when the model's data first hold transitions of the
+    damaged arm (the state's last dimension, the flag, is 1), the flag's GP input gets
+    ``lengthscale`` in every output GP instead of the ``ignored`` value that
+    :func:`~pilco.tasks.reacher.ignore_constant_inputs` gave it while it was constant, so
+    that the next fit learns how far each output of the damaged arm follows the healthy
+    arm's data (from a long lengthscale the fit's gradient would be ~0)."""
+    import numpy as np
+
+    column = agent.state_dim - 1  # the reacher's GP inputs: the state, then the action
+
+    def on_new_data(X, Y) -> None:
+        if not np.any(X[:, column] != 0.0):
+            return
+        for model in agent.mgpr.models:
+            ell = np.array(model.kernel.lengthscales.numpy(), dtype=float)
+            if np.isclose(ell[column], ignored, rtol=1e-9):  # exact but for the bijector
+                ell[column] = lengthscale
+                model.kernel.lengthscales.assign(ell)
+
+    agent.mgpr.add_data_listener(on_new_data)
 
 
 def _learned_solved(exp: Experiment) -> bool:

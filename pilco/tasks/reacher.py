@@ -357,13 +357,16 @@ def reached_within(steps: int):
 
 
 def make_experiment(args: argparse.Namespace, task: str = "reacher",
-                    damaged: bool = False, success_fn=None) -> Experiment:
-    """A new run in ``args.output``, or the one saved there with ``--resume``."""
+                    damaged: bool = False, success_fn=None, wrap_env=None) -> Experiment:
+    """A new run in ``args.output``, or the one saved there with ``--resume``;
+    ``wrap_env(env) -> env`` wraps the env (e.g. to add an observation)."""
     from .. import plotting
 
     config = make_config(args, task, damaged)
     # the reward needs the target: the env is made here and handed to the experiment
     env = make_env(config.env_id, config.env_kwargs, render=False)
+    if wrap_env is not None:
+        env = wrap_env(env)
     target = env.unwrapped.target
 
     def render(episode):
