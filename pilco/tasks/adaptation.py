@@ -4,9 +4,10 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
 1. the random episodes and up to ``--healthy-episodes`` learned episodes on the healthy
    arm, stopping as soon as an episode has reached the target and at least
    ``--min-healthy-episodes`` were run;
-2. :func:`damage`: ``env.damage(--damaged-joints, --damage-mode)`` (the policy is not
-   told; by default the elbow is stuck at its angle, ``--damage-mode zero`` straightens
-   it); the damaged arm's start state becomes the agent's ``m_init``;
+2. :func:`damage`: ``env.damage(--damaged-joints, --damage-mode)`` (the agent is not
+   told unless ``--damage-input``; by default the elbow is stuck at its angle,
+   ``--damage-mode zero`` straightens it); the damaged arm's start state becomes the
+   agent's ``m_init``;
 3. up to ``--damaged-episodes`` learned episodes with the same agent, policy and data
    (``--drop-old-data``: the model then learns from the damaged episodes only;
    ``--damaged-cost main``: the policy then optimises the main position cost only),
@@ -27,8 +28,7 @@ from ..experiment.cli import finish, non_negative_int, parse_task_args, positive
 from . import reacher
 
 __all__ = ["build_parser", "parse_args", "make_experiment", "damage", "learn_the_flag",
-           "run_healthy", "run", "figures",
-           "main", "RECOVER_WITHIN", "ADDED_LATER"]
+           "run_healthy", "run", "figures", "main", "RECOVER_WITHIN", "ADDED_LATER"]
 
 #: success: the damaged arm reaches again within this many damaged episodes
 RECOVER_WITHIN = 3
@@ -115,8 +115,10 @@ def make_experiment(args: argparse.Namespace) -> Experiment:
 
 
 def damage(exp: Experiment, args: argparse.Namespace) -> None:
-    """Break the arm's joints; the agent's ``m_init`` becomes the damaged start state and,
-    with ``--damaged-cost main``, its reward the main position cost alone."""
+    """Break the arm's joints; the agent's ``m_init`` becomes the damaged start state;
+    with ``--damaged-cost main`` its reward becomes the main position cost alone, with
+    ``--damage-input`` :func:`learn_the_flag` watches its model's data. Called again on a
+    run resumed after the damage."""
     env = exp.make_env()
     env.unwrapped.damage(tuple(args.damaged_joints), args.damage_mode)
     obs, _ = env.reset(seed=exp.episode_seed(len(exp.episodes) + 1))
