@@ -255,6 +255,32 @@ def test_the_first_policy_optimisation_can_have_its_own_budget(tmp_path):
         config(episodes=0)
 
 
+def test_policy_restarts_can_stop_once_an_episode_is_solved(tmp_path):
+    def restarts_seen(when, gains):
+        exp, agents = experiment(tmp_path / when, config(policy_restarts=3,
+                                                         policy_restart_when=when))
+        seen = []
+        exp.run_random_episode()
+        agent = agents[0]
+        original = agent.optimize_policy
+
+        def recording(maxiter, restarts, **kw):
+            seen.append(restarts)
+            return original(maxiter, restarts=restarts, **kw)
+
+        agent.optimize_policy = recording
+        for gain in gains:  # gain 0: the episode goes nowhere, unsolved
+            agent.gain = gain
+            exp.run_learned_episode()
+        return seen, exp.solved_at_episode()
+
+    assert restarts_seen("always", [0.0, 0.6, 0.6]) == ([3, 3, 3], 3)
+    assert restarts_seen("unsolved", [0.0, 0.6, 0.6]) == ([3, 3, 1], 3)
+    assert restarts_seen("unsolved", [0.0, 0.0, 0.0]) == ([3, 3, 3], None)
+    with pytest.raises(ValueError, match="policy_restart_when must be 'always' or 'unsolved'"):
+        config(policy_restart_when="solved")
+
+
 def test_the_policy_search_hook_runs_before_each_policy_search(tmp_path):
     seen = []
 

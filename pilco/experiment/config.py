@@ -37,6 +37,10 @@ class ExperimentConfig:
         policy_early_stop: ``"always"``, or ``"solved"``: the early stop applies only once
             an episode has been solved (refining a policy that works needs few
             iterations; before that, a slow stretch often precedes a large gain).
+        policy_restart_when: ``"always"``, or ``"unsolved"``: the ``policy_restarts - 1``
+            restarts from random policies run only while no episode has been solved (a
+            policy stuck in a poor optimum, e.g. the cart-pole's "swing over the top and
+            round again", is left for a better one; once solved, the warm start is kept).
         cost_width: width of the saturating cost of the distance (summary ``cost``).
         success_threshold: distance [m] counted as "at the target".
         solved_rule: ``"reach"``: an episode is solved when any state is within the
@@ -70,6 +74,7 @@ class ExperimentConfig:
     policy_patience: int = 10
     policy_iters_first: Optional[int] = None
     policy_early_stop: str = "always"
+    policy_restart_when: str = "always"
     cost_width: float = 0.25
     success_threshold: float = 0.05
     solved_rule: str = "reach"
@@ -92,6 +97,9 @@ class ExperimentConfig:
         if self.policy_early_stop not in ("always", "solved"):
             raise ValueError(f"policy_early_stop must be 'always' or 'solved', got "
                              f"{self.policy_early_stop!r}")
+        if self.policy_restart_when not in ("always", "unsolved"):
+            raise ValueError(f"policy_restart_when must be 'always' or 'unsolved', got "
+                             f"{self.policy_restart_when!r}")
         if self.solved_rule not in ("reach", "hold"):
             raise ValueError(f"solved_rule must be 'reach' or 'hold', got {self.solved_rule!r}")
         if self.random_episodes < 1:

@@ -40,18 +40,20 @@ def train_model(exp, number: int) -> None:
 
 def improve_policy(exp, number: int) -> float:
     """``optimize_policy`` with the run's settings; the relative early stop applies always
-    or, with ``policy_early_stop="solved"``, once an episode was solved. Returns the
-    predicted return."""
+    or, with ``policy_early_stop="solved"``, once an episode was solved; the restarts
+    run always or, with ``policy_restart_when="unsolved"``, until an episode was solved.
+    Returns the predicted return."""
     cfg, agent = exp.config, exp.agent
     first = number == cfg.random_episodes + 1
     iters = cfg.policy_iters_first if first and cfg.policy_iters_first else cfg.policy_iters
-    early_stop = cfg.policy_early_stop == "always" or exp.solved_at_episode() is not None
+    solved = exp.solved_at_episode() is not None
+    early_stop = cfg.policy_early_stop == "always" or solved
+    restarts = cfg.policy_restarts if cfg.policy_restart_when == "always" or not solved else 1
     if exp.before_policy_search is not None:
         exp.before_policy_search(agent, number)
-    with progress_bar(iters * cfg.policy_restarts, f"episode {number} policy",
-                      cfg.quiet) as bar:
+    with progress_bar(iters * restarts, f"episode {number} policy", cfg.quiet) as bar:
         expected = agent.optimize_policy(
-            maxiter=iters, restarts=cfg.policy_restarts,
+            maxiter=iters, restarts=restarts,
             seed=exp.episode_seed(number), callback=optimizer_callback(bar),
             method=cfg.policy_method,
             min_rel_improvement=cfg.policy_min_rel_improvement if early_stop else None,
