@@ -155,6 +155,13 @@ def rule(**changes):
 def test_verdict_rules_in_order_on_synthetic_numbers():
     assert rule(solved=True, coverage=0.1, gain=50.0) == ("solved", 1)
     assert rule(start_widths=3.01) == ("objective: cost flat", 2)
+    # a flat start that a clearly better policy of the same objective overcame on the
+    # real system is the optimiser's failure, not the objective's
+    assert rule(start_widths=4.0, gain=9.0, better_solves_real=True) == ("optimiser", 4)
+    assert rule(start_widths=4.0, gain=9.0, better_solves_real=False) == (
+        "objective: cost flat", 2)
+    assert rule(start_widths=4.0, gain=0.5, better_solves_real=True) == (
+        "objective: cost flat", 2)
     assert rule(start_widths=2.99) != ("objective: cost flat", 2)
     # predicted to solve but failed: one-step coverage (overall 0.90, worst dimension 0.70)
     # decides, before any better optimum

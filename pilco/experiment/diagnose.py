@@ -38,7 +38,10 @@ missing there); "clearly better" means a predicted cost lower by at least
 2. ``objective: cost flat``: d0 > 3 σ_c, i.e. the cost's slope at the start is below
    3 e^-4 = 5.5 % of its maximum: the optimiser gets almost no gradient. (The slope is
    that of the cost at the start distribution's mean; a wide predicted spread, as in the
-   cart-pole's swing-up from 4 σ_c, still gives the expected cost some slope.)
+   cart-pole's swing-up from 4 σ_c, still gives the expected cost some slope.) Not when
+   rule 4's evidence holds: a clearly better candidate of the same objective solves the
+   task on the real system, so the flat start did not stop the search from succeeding
+   (the cart-pole's failures are of this kind).
 3. The run's policy was predicted to solve the task (the mean predicted distance meets the
    task's solved rule: within the success threshold at some step, or for the last
    ``hold_steps`` steps) but the real episode did not: ``model`` if model wrong (it is
@@ -132,7 +135,8 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
     if facts["solved"]:
         return {"label": "solved", "rule": 1, "reason": "the episode solved the task"}
     widths = facts.get("start_widths")
-    if widths is not None and widths > t.flat_widths:
+    confirmed = better and bool(facts.get("better_solves_real"))
+    if widths is not None and widths > t.flat_widths and not confirmed:
         return {"label": "objective: cost flat", "rule": 2,
                 "reason": f"start distance {widths:.2f} cost widths > {t.flat_widths:g}: the "
                           f"cost's slope there is {slope_ratio(widths):.1%} of its maximum"}
@@ -140,7 +144,7 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
         return {"label": model_or_objective, "rule": 3,
                 "reason": "the run's policy was predicted to solve the task but did not; "
                           + cov_text}
-    if better and facts.get("better_solves_real"):
+    if confirmed:
         return {"label": "optimiser", "rule": 4,
                 "reason": gain_text + ", and a clearly better policy solves the task on "
                                       "the real system"}
