@@ -281,6 +281,39 @@ def test_policy_restarts_can_stop_once_an_episode_is_solved(tmp_path):
         config(policy_restart_when="solved")
 
 
+def test_policy_searches_can_start_fresh_until_an_episode_is_solved(tmp_path):
+    class Controller:
+        def __init__(self):
+            self.seeds = []
+
+        def randomize(self, seed=None):
+            self.seeds.append(seed)
+
+    def fresh_starts(when, gains):
+        exp, agents = experiment(tmp_path / when, config(episodes=1 + len(gains),
+                                                         policy_warm_start=when))
+        exp.run_random_episode()
+        agents[0].controller = Controller()
+        for gain in gains:  # gain 0: the episode goes nowhere, unsolved
+            agents[0].gain = gain
+            exp.run_learned_episode()
+        return agents[0].controller.seeds, exp.solved_at_episode()
+
+    # the first learned episode (2) starts from the initial policy; 3 and 4 from fresh
+    # ones, seeded by the episode; once episode 4 solved, 5 starts from 4's policy
+    assert fresh_starts("solved", [0.0, 0.0, 0.6, 0.6]) == ([3003, 3004], 4)
+    assert fresh_starts("always", [0.0, 0.0, 0.6, 0.6]) == ([], 4)
+    exp, agents = experiment(tmp_path / "none", config(policy_warm_start="solved"))
+    exp.run_random_episode()
+    agents[0].controller = object()
+    agents[0].gain = 0.0
+    exp.run_learned_episode()  # the first learned episode needs no fresh policy
+    with pytest.raises(TypeError, match="needs a controller with randomize"):
+        exp.run_learned_episode()
+    with pytest.raises(ValueError, match="policy_warm_start must be 'always' or 'solved'"):
+        config(policy_warm_start="never")
+
+
 def test_the_policy_search_hook_runs_before_each_policy_search(tmp_path):
     seen = []
 

@@ -26,6 +26,7 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
                          model_min_rel_improvement: Optional[float] = None,
                          policy_early_stop: str = "always",
                          policy_restart_when: str = "always",
+                         policy_warm_start: str = "always",
                          max_data: Optional[int] = None, random_episodes: int = 1,
                          output: str = "runs/run-seed{seed}") -> None:
     """Flags shared by the tasks (defaults given per task)."""
@@ -78,6 +79,11 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
                    help="run the --policy-restarts restarts from random policies in every "
                         "policy optimisation, or only until an episode was solved "
                         "(default %(default)s)")
+    g.add_argument("--policy-warm-start", choices=("always", "solved"),
+                   default=policy_warm_start,
+                   help="start each policy search from the previous episode's policy always, "
+                        "or only once an episode was solved (before: from a fresh random "
+                        "policy; default %(default)s)")
     g.add_argument("--model-min-rel-improvement", type=float, default=model_min_rel_improvement,
                    help="stop GP training once its loss fell by less than this fraction of "
                         "it over the last 10 iterations (default %(default)s; 0 or None: never)")
@@ -98,6 +104,7 @@ def learning_settings(args: argparse.Namespace) -> Dict[str, Any]:
         policy_min_rel_improvement=args.policy_min_rel_improvement,
         policy_patience=args.policy_patience, policy_early_stop=args.policy_early_stop,
         policy_restart_when=args.policy_restart_when,
+        policy_warm_start=args.policy_warm_start,
         policy_iters_first=args.policy_iters_first,
     )
 

@@ -41,6 +41,10 @@ class ExperimentConfig:
             restarts from random policies run only while no episode has been solved (a
             policy stuck in a poor optimum, e.g. the cart-pole's "swing over the top and
             round again", is left for a better one; once solved, the warm start is kept).
+        policy_warm_start: ``"always"``: every policy search starts from the policy of
+            the episode before; ``"solved"``: only once an episode was solved; before
+            that, each learned episode after the first starts from a fresh random policy
+            (``controller.randomize``), the same number of searches as the warm start.
         cost_width: width of the saturating cost of the distance (summary ``cost``).
         success_threshold: distance [m] counted as "at the target".
         solved_rule: ``"reach"``: an episode is solved when any state is within the
@@ -75,6 +79,7 @@ class ExperimentConfig:
     policy_iters_first: Optional[int] = None
     policy_early_stop: str = "always"
     policy_restart_when: str = "always"
+    policy_warm_start: str = "always"
     cost_width: float = 0.25
     success_threshold: float = 0.05
     solved_rule: str = "reach"
@@ -100,6 +105,9 @@ class ExperimentConfig:
         if self.policy_restart_when not in ("always", "unsolved"):
             raise ValueError(f"policy_restart_when must be 'always' or 'unsolved', got "
                              f"{self.policy_restart_when!r}")
+        if self.policy_warm_start not in ("always", "solved"):
+            raise ValueError(f"policy_warm_start must be 'always' or 'solved', got "
+                             f"{self.policy_warm_start!r}")
         if self.solved_rule not in ("reach", "hold"):
             raise ValueError(f"solved_rule must be 'reach' or 'hold', got {self.solved_rule!r}")
         if self.random_episodes < 1:

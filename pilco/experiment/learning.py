@@ -10,7 +10,8 @@ import numpy as np
 from .episode import Episode
 from .progress import optimizer_callback, progress_bar
 
-__all__ = ["train_model", "improve_policy", "predictions_before", "predictions_after"]
+__all__ = ["train_model", "start_policy", "improve_policy", "learn_policy",
+           "predictions_before", "predictions_after"]
 
 logger = logging.getLogger(__name__)
 
@@ -42,6 +43,7 @@ def improve_policy(exp, number: int) -> float:
     """``optimize_policy`` with the run's settings; the relative early stop applies always
     or, with ``policy_early_stop="solved"``, once an episode was solved; the restarts
     run always or, with ``policy_restart_when="unsolved"``, until an episode was solved.
+    The search starts from the agent's current policy (see :func:`learn_policy`).
     Returns the predicted return."""
     cfg, agent = exp.config, exp.agent
     first = number == cfg.random_episodes + 1
@@ -61,6 +63,31 @@ def improve_policy(exp, number: int) -> float:
     logger.info("episode %d: predicted return %.3f over %d steps", number, expected,
                 agent.horizon)
     return expected
+
+
+def start_policy(exp, number: int) -> None:
+    """Choose where episode ``number``'s policy search starts: the policy of the episode
+    before (kept in place), or, with ``policy_warm_start="solved"`` while no episode was
+    solved, a fresh random policy (``controller.randomize``, seeded by the episode); the
+    first learned episode always starts from the agent's initial policy."""
+    cfg, agent = exp.config, exp.agent
+    if (cfg.policy_warm_start == "always" or number == cfg.random_episodes + 1
+            or exp.solved_at_episode() is not None):
+        return
+    randomize = getattr(agent.controller, "randomize", None)
+    if not callable(randomize):
+        raise TypeError(f"policy_warm_start='solved' needs a controller with "
+                        f"randomize(seed=...); {type(agent.controller).__name__} has none")
+    randomize(seed=exp.episode_seed(number))
+    logger.info("episode %d: no episode solved yet, the policy search starts from a fresh "
+                "random policy", number)
+
+
+def learn_policy(exp, number: int) -> float:
+    """The policy phase of learned episode ``number``: :func:`start_policy`, then
+    :func:`improve_policy`; returns the predicted return."""
+    start_policy(exp, number)
+    return improve_policy(exp, number)
 
 
 def predictions_before(exp) -> Dict[str, np.ndarray]:

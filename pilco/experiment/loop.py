@@ -25,7 +25,7 @@ import numpy as np
 
 from .config import ExperimentConfig
 from .episode import Episode, distance_from_info, make_env, rollout
-from .learning import improve_policy, predictions_after, predictions_before, train_model
+from .learning import learn_policy, predictions_after, predictions_before, train_model
 from .signals import (interrupts_deferred, raise_if_stop_requested,
                       sigterm_as_keyboard_interrupt, stop_requested)
 from .record import RunRecord
@@ -157,7 +157,7 @@ class Experiment(RunRecord):
         number = len(self.episodes) + 1
         seconds: Dict[str, float] = {}
         cpu: Dict[str, float] = {}
-        for phase, step in (("model", train_model), ("policy", improve_policy)):
+        for phase, step in (("model", train_model), ("policy", learn_policy)):
             t0, c0 = time.perf_counter(), time.process_time()
             step(self, number)
             seconds[phase] = time.perf_counter() - t0

@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from .episode import Episode
-from .learning import improve_policy, train_model
+from .learning import learn_policy, train_model
 
 __all__ = ["view_before", "action_error", "replay_learning", "agent_of_episode"]
 
@@ -59,7 +59,7 @@ def replay_learning(exp, episode: int):
         view.records = list(exp.records[: j - 1])
         view.agent.set_data(view.training_data())
         train_model(view, j)
-        improve_policy(view, j)
+        learn_policy(view, j)
         logger.info("replayed the model fit and policy optimisation of episode %d in %.1f s",
                     j, time.perf_counter() - t0)
     return view
