@@ -70,20 +70,18 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
                    help="stop a policy optimisation once its predicted return grew by less "
                         "than this fraction of it over the last --policy-patience iterations "
                         "(default %(default)s; 0 or None: never)")
-    g.add_argument("--policy-early-stop", choices=("always", "solved"),
-                   default=policy_early_stop,
-                   help="apply --policy-min-rel-improvement always, or only once an episode "
-                        "was solved (default %(default)s)")
-    g.add_argument("--policy-restart-when", choices=("always", "unsolved"),
-                   default=policy_restart_when,
-                   help="run the --policy-restarts restarts from random policies in every "
-                        "policy optimisation, or only until an episode was solved "
-                        "(default %(default)s)")
-    g.add_argument("--policy-warm-start", choices=("always", "solved"),
-                   default=policy_warm_start,
-                   help="start each policy search from the previous episode's policy always, "
-                        "or only once an episode was solved (before: from a fresh random "
-                        "policy; default %(default)s)")
+    # switches that change once the run has solved an episode
+    for name, choices, default, text in (
+            ("--policy-early-stop", ("always", "solved"), policy_early_stop,
+             "apply --policy-min-rel-improvement always, or only once an episode was solved"),
+            ("--policy-restart-when", ("always", "unsolved"), policy_restart_when,
+             "run the --policy-restarts restarts from random policies in every policy "
+             "optimisation, or only until an episode was solved"),
+            ("--policy-warm-start", ("always", "solved"), policy_warm_start,
+             "start each policy search from the previous episode's policy always, or only "
+             "once an episode was solved (before: from a fresh random policy)")):
+        g.add_argument(name, choices=choices, default=default,
+                       help=f"{text} (default %(default)s)")
     g.add_argument("--model-min-rel-improvement", type=float, default=model_min_rel_improvement,
                    help="stop GP training once its loss fell by less than this fraction of "
                         "it over the last 10 iterations (default %(default)s; 0 or None: never)")
