@@ -99,17 +99,13 @@ class ExperimentConfig:
                 not isinstance(self.policy_iters_first, int) or self.policy_iters_first < 1):
             raise ValueError(f"policy_iters_first must be a whole number >= 1 or None, got "
                              f"{self.policy_iters_first!r}")
-        if self.policy_early_stop not in ("always", "solved"):
-            raise ValueError(f"policy_early_stop must be 'always' or 'solved', got "
-                             f"{self.policy_early_stop!r}")
-        if self.policy_restart_when not in ("always", "unsolved"):
-            raise ValueError(f"policy_restart_when must be 'always' or 'unsolved', got "
-                             f"{self.policy_restart_when!r}")
-        if self.policy_warm_start not in ("always", "solved"):
-            raise ValueError(f"policy_warm_start must be 'always' or 'solved', got "
-                             f"{self.policy_warm_start!r}")
-        if self.solved_rule not in ("reach", "hold"):
-            raise ValueError(f"solved_rule must be 'reach' or 'hold', got {self.solved_rule!r}")
+        for name, (a, b) in (("policy_early_stop", ("always", "solved")),
+                             ("policy_restart_when", ("always", "unsolved")),
+                             ("policy_warm_start", ("always", "solved")),
+                             ("solved_rule", ("reach", "hold"))):
+            value = getattr(self, name)
+            if value not in (a, b):
+                raise ValueError(f"{name} must be {a!r} or {b!r}, got {value!r}")
         if self.random_episodes < 1:
             raise ValueError("at least one random episode is needed to build the model")
         if self.episodes < self.random_episodes:
