@@ -249,6 +249,10 @@ def test_the_first_policy_optimisation_can_have_its_own_budget(tmp_path):
     exp.run_learned_episode()
     exp.run_learned_episode()
     assert seen == [60, 7]
+    two_random = config(policy_iters=7, policy_iters_first=60, random_episodes=2, episodes=4)
+    assert [two_random.policy_iterations(n) for n in (3, 4)] == [60, 7]
+    assert [two_random.first_learned(n) for n in (2, 3, 4)] == [False, True, False]
+    assert config(policy_iters=7).policy_iterations(2) == 7
     with pytest.raises(ValueError, match="policy_iters_first must be a whole number"):
         config(policy_iters_first=0)
     with pytest.raises(ValueError, match="episodes must be a whole number >= 1"):

@@ -115,3 +115,14 @@ class ExperimentConfig:
             self.max_data = None
         if self.max_data is not None and self.max_data < 2:
             raise ValueError(f"max_data must be at least 2 (or None), got {self.max_data}")
+
+    def first_learned(self, number: int) -> bool:
+        """Whether episode ``number`` (1-based) is the first one with a learned policy."""
+        return number == self.random_episodes + 1
+
+    def policy_iterations(self, number: int) -> int:
+        """The policy search's iteration budget of episode ``number``:
+        ``policy_iters_first`` for the first learned episode when set, else ``policy_iters``."""
+        if self.first_learned(number) and self.policy_iters_first:
+            return self.policy_iters_first
+        return self.policy_iters

@@ -302,8 +302,7 @@ def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restart
     """The run's policy against ``restarts`` re-optimisations from random policies and one
     continuing from the run's policy, all on the same model with the run's settings."""
     agent, cfg = view.agent, view.config
-    iters = (cfg.policy_iters_first if number == cfg.random_episodes + 1
-             and cfg.policy_iters_first else cfg.policy_iters)
+    iters = cfg.policy_iterations(number)
     run_policy = snapshot(agent.controller)
     candidates = [_candidate(view, number, geometry, "run", None, env)]
     starts: List[Tuple[str, Optional[int]]] = [("continued", None)]

@@ -46,8 +46,7 @@ def improve_policy(exp, number: int) -> float:
     The search starts from the agent's current policy (see :func:`learn_policy`).
     Returns the predicted return."""
     cfg, agent = exp.config, exp.agent
-    first = number == cfg.random_episodes + 1
-    iters = cfg.policy_iters_first if first and cfg.policy_iters_first else cfg.policy_iters
+    iters = cfg.policy_iterations(number)
     solved = exp.solved_at_episode() is not None
     early_stop = cfg.policy_early_stop == "always" or solved
     restarts = cfg.policy_restarts if cfg.policy_restart_when == "always" or not solved else 1
@@ -71,7 +70,7 @@ def start_policy(exp, number: int) -> None:
     solved, a fresh random policy (``controller.randomize``, seeded by the episode); the
     first learned episode always starts from the agent's initial policy."""
     cfg, agent = exp.config, exp.agent
-    if (cfg.policy_warm_start == "always" or number == cfg.random_episodes + 1
+    if (cfg.policy_warm_start == "always" or cfg.first_learned(number)
             or exp.solved_at_episode() is not None):
         return
     randomize = getattr(agent.controller, "randomize", None)
