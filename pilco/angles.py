@@ -32,38 +32,44 @@ def trig_moments(m, s, indices: Sequence[int], scale=None):
     idx = np.asarray(indices, dtype=np.int64).reshape(-1)
     I = len(idx)
     D = m.shape[-1]
-    if scale is None:
-        e = tf.ones([I], dtype=m.dtype)
-    else:
-        e = tf.broadcast_to(tf.reshape(_as_float(scale), [-1]), [I])
-
-    mi = tf.gather(m[0], idx)  # [I]
-    vi = tf.gather(tf.gather(s, idx, axis=0), idx, axis=1)  # [I, I]
-    vii = tf.linalg.diag_part(vi)
-    damp = e * tf.exp(-0.5 * vii)
-    msin = damp * tf.sin(mi)
+    # Constant one-hot selections and permutations instead of gathers and scatters: a
+    # matrix product with a constant has a one-product gradient, and the loop body of a
+    # rollout stays short (this runs twice per step of an angle task).
+    pick = tf.constant(np.eye(D)[:, idx], dtype=m.dtype)  # [D, I]
+    mi = tf.matmul(m, pick)  # [1, I]
+    vi = tf.matmul(pick, tf.matmul(s, pick), transpose_a=True)  # [I, I]
+    vii = tf.linalg.diag_part(vi)[None, :]  # [1, I]
+    damp = tf.exp(-0.5 * vii)
+    if scale is not None:
+        e = tf.reshape(tf.broadcast_to(tf.reshape(_as_float(scale), [-1]), [I]), [1, I])
+        damp = e * damp
+    msin = damp * tf.sin(mi)  # [1, I]
     mcos = damp * tf.cos(mi)
 
-    lq = -0.5 * (vii[:, None] + vii[None, :])
+    lq = -0.5 * (tf.transpose(vii) + vii)
     q = tf.exp(lq)
-    dif = mi[:, None] - mi[None, :]
-    add = mi[:, None] + mi[None, :]
+    dif = tf.transpose(mi) - mi
+    add = tf.transpose(mi) + mi
     plus = tf.exp(lq + vi) - q
     minus = tf.exp(lq - vi) - q
-    ss = plus * tf.cos(dif) - minus * tf.cos(add)  # Cov(sin, sin) * 2
-    cc = plus * tf.cos(dif) + minus * tf.cos(add)
+    cos_dif, cos_add = tf.cos(dif), tf.cos(add)
+    ss = plus * cos_dif - minus * cos_add  # Cov(sin_i, sin_j) * 2
+    cc = plus * cos_dif + minus * cos_add  # Cov(cos_i, cos_j) * 2
     sc = plus * tf.sin(dif) + minus * tf.sin(add)  # Cov(sin_i, cos_j) * 2
-    # interleave [sin, cos] per angle
-    top = tf.reshape(tf.stack([ss, sc], axis=-1), [I, 2 * I])
-    bottom = tf.reshape(tf.stack([tf.transpose(sc), cc], axis=-1), [I, 2 * I])
-    S = tf.reshape(tf.stack([top, bottom], axis=1), [2 * I, 2 * I])
-    E2 = tf.reshape(tf.stack([e, e], axis=-1), [2 * I])
-    S = 0.5 * S * E2[:, None] * E2[None, :]
-    M = tf.reshape(tf.stack([msin, mcos], axis=-1), [1, 2 * I])
-    # C: rows idx; column 2k is d/dm sin = cos part, 2k+1 is -sin part
-    Cblock = tf.reshape(tf.stack([tf.linalg.diag(mcos), tf.linalg.diag(-msin)], axis=-1),
-                        [I, 2 * I])
-    C = tf.scatter_nd(idx[:, None], Cblock, [D, 2 * I])
+    # blocks [sin θ1..θI, cos θ1..θI] first, then interleaved by a constant permutation
+    S = 0.5 * tf.concat([tf.concat([ss, sc], 1), tf.concat([tf.transpose(sc), cc], 1)], 0)
+    if scale is not None:
+        e2 = tf.concat([e, e], 1)
+        S = S * tf.transpose(e2) * e2
+    M = tf.concat([msin, mcos], 1)
+    # C = inv(s) Cov[x, (sin, cos)]: column k of sin is e_k cos, of cos is -e_k sin
+    C = tf.concat([pick * mcos, pick * -msin], 1)  # [D, 2I]
+    if I > 1:
+        order = np.stack([np.arange(I), I + np.arange(I)], axis=1).reshape(-1)
+        perm = tf.constant(np.eye(2 * I)[:, order], dtype=m.dtype)  # block -> interleaved
+        M = tf.matmul(M, perm)
+        S = tf.matmul(perm, tf.matmul(S, perm), transpose_a=True)
+        C = tf.matmul(C, perm)
     return M, S, C
 
 
@@ -87,9 +93,10 @@ def augment_state(m, s, angle_indices: Sequence[int]):
     Mt, St, Ct = trig_moments(m, s, ang)
     sel = tf.constant(np.eye(D)[:, keep], dtype=m.dtype)  # [D, K]
     Cf = tf.concat([sel, Ct], axis=1)  # [D, F]
-    Mf = tf.concat([tf.gather(m, keep, axis=1), Mt], axis=1)
-    s_keep = tf.gather(tf.gather(s, keep, axis=0), keep, axis=1)
-    cross = tf.matmul(tf.gather(s, keep, axis=0), Ct)  # Cov[x_keep, trig], [K, 2I]
+    Mf = tf.concat([tf.matmul(m, sel), Mt], axis=1)
+    s_rows = tf.matmul(sel, s, transpose_a=True)  # Cov[x_keep, x], [K, D]
+    s_keep = tf.matmul(s_rows, sel)
+    cross = tf.matmul(s_rows, Ct)  # Cov[x_keep, trig], [K, 2I]
     Sf = tf.concat(
         [tf.concat([s_keep, cross], axis=1), tf.concat([tf.transpose(cross), St], axis=1)],
         axis=0,

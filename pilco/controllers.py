@@ -44,18 +44,17 @@ def _sin_moments(m, s, e):
 
     Shapes: m [1, I], s [I, I], e [I] -> M [1, I], S [I, I], C [I, I].
     """
-    mi = m[0]
-    vii = tf.linalg.diag_part(s)
+    e = e[None, :]  # [1, I]; rows and columns below come from transposes, not slices
+    vii = tf.linalg.diag_part(s)[None, :]
     damp = e * tf.exp(-0.5 * vii)
-    M = damp * tf.sin(mi)
-    lq = -0.5 * (vii[:, None] + vii[None, :])
+    M = damp * tf.sin(m)
+    lq = -0.5 * (tf.transpose(vii) + vii)
     q = tf.exp(lq)
-    S = (tf.exp(lq + s) - q) * tf.cos(mi[:, None] - mi[None, :]) - (tf.exp(lq - s) - q) * tf.cos(
-        mi[:, None] + mi[None, :]
-    )
-    S = 0.5 * e[:, None] * e[None, :] * S
-    C = tf.linalg.diag(damp * tf.cos(mi))
-    return M[None, :], S, C
+    mt = tf.transpose(m)
+    S = (tf.exp(lq + s) - q) * tf.cos(mt - m) - (tf.exp(lq - s) - q) * tf.cos(mt + m)
+    S = 0.5 * (tf.transpose(e) * e) * S
+    C = tf.linalg.diag(damp[0] * tf.cos(m[0]))
+    return M, S, C
 
 
 def _max_action_vector(max_action, size: int, dtype) -> tf.Tensor:

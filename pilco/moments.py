@@ -188,9 +188,10 @@ def _pair_exponent_factors(T, iiI, iiJ, kI, kJ):
     aJ = tf.matmul(T, iiJ)
     u = kI + 0.5 * tf.reduce_sum(aI * iiI, axis=1)
     v = kJ + 0.5 * tf.reduce_sum(aJ * iiJ, axis=1)
-    ones = tf.ones_like(u)[:, None, :]
-    leftT = tf.concat([aI, u[:, None, :], ones], axis=1)
-    rightT = tf.concat([iiJ, ones, v[:, None, :]], axis=1)
+    u, v = tf.expand_dims(u, 1), tf.expand_dims(v, 1)
+    ones = tf.ones_like(u)
+    leftT = tf.concat([aI, u, ones], axis=1)
+    rightT = tf.concat([iiJ, ones, v], axis=1)
     return aI, aJ, leftT, rightT
 
 
@@ -221,8 +222,8 @@ def _pair_second_moments(T, mI, mJ, kI, kJ, XI, XJ, bI, bJ, iK):
 
     @tf.custom_gradient
     def block(T, mI, mJ, kI, kJ):
-        iiI = XI - mI[:, :, None]
-        iiJ = XJ - mJ[:, :, None]
+        iiI = XI - tf.expand_dims(mI, 2)
+        iiJ = XJ - tf.expand_dims(mJ, 2)
         aI, aJ, leftT, rightT = _pair_exponent_factors(T, iiI, iiJ, kI, kJ)
         Q = tf.exp(tf.matmul(leftT, rightT, transpose_a=True))  # [P, n, n]
         # [Q bJ, Q (bJ * iiJ)^T]: [P, n, D + 1]
@@ -230,7 +231,7 @@ def _pair_second_moments(T, mI, mJ, kI, kJ, XI, XJ, bI, bJ, iK):
                        transpose_b=True)
         Qb = bI * QB[:, :, 0]  # row sums of the rank-one part, [P, n]
         bQ = bJ * tf.linalg.matvec(Q, bI, adjoint_a=True)  # its column sums, [P, n]
-        GJ = bI[:, :, None] * QB[:, :, 1:]  # [P, n, D]
+        GJ = tf.expand_dims(bI, 2) * QB[:, :, 1:]  # [P, n, D]
         if iK is not None:
             E = iK.shape[0]
             Ones_iiJ = tf.concat([tf.ones_like(bJ[:E, None, :]), iiJ[:E]], axis=1)
@@ -244,9 +245,10 @@ def _pair_second_moments(T, mI, mJ, kI, kJ, XI, XJ, bI, bJ, iK):
         value = tf.reduce_sum(Qb, axis=1)
 
         def grad(g):
-            r = g[:, None] * Qb  # [P, n], d/du
-            c = g[:, None] * bQ  # [P, n], d/dv
-            dT = (tf.matmul(iiI, g[:, None, None] * GJ)
+            g1 = tf.expand_dims(g, 1)
+            r = g1 * Qb  # [P, n], d/du
+            c = g1 * bQ  # [P, n], d/dv
+            dT = (tf.matmul(iiI, tf.expand_dims(g1, 2) * GJ)
                   + 0.5 * tf.matmul(iiI * r[:, None, :], iiI, transpose_b=True)
                   + 0.5 * tf.matmul(iiJ * c[:, None, :], iiJ, transpose_b=True))
             dm = -(tf.linalg.matvec(aI, r) + tf.linalg.matvec(aJ, c))
@@ -360,6 +362,11 @@ def prepare(factorization: Factorization, constant: bool = False,
     )
 
 
+def _one_hot(index: np.ndarray, size: int, dtype) -> tf.Tensor:
+    """Constant [len(index), size] matrix whose row k picks entry ``index[k]``."""
+    return tf.constant(np.eye(size)[np.asarray(index)], dtype=dtype)
+
+
 def eye_like(s: tf.Tensor) -> tf.Tensor:
     """Identity of the size of the square matrix ``s``: a constant when the size is static."""
     n = s.shape[-1]
@@ -378,23 +385,25 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
     eye = eye_like(s)
 
     # Mean and inv(s) Cov[x, f(x)]: B = L^-1 s L^-1 + I per output.
-    diff = pred.scaled_centers - (m * pred.inv_lengthscales)[:, :, None]  # (c - m) / l, [E, D, n]
+    diff = pred.scaled_centers - tf.expand_dims(m * pred.inv_lengthscales, 2)  # (c - m) / l
     B_inv, logdet_B = _inv_logdet(s * pred.inv_lengthscales_outer + eye)
     B_inv_diff = tf.matmul(B_inv, diff)  # [E, D, n]
     weighted = tf.exp(-0.5 * tf.reduce_sum(diff * B_inv_diff, axis=1)) * pred.beta  # [E, n]
     scale = pred.signal_variance * tf.exp(-0.5 * logdet_B)  # [E]
     M = scale * tf.reduce_sum(weighted, axis=-1)
-    V = (scale[:, None] * pred.inv_lengthscales) * tf.linalg.matvec(B_inv_diff, weighted)
+    V = (tf.expand_dims(scale, 1) * pred.inv_lengthscales) * tf.linalg.matvec(B_inv_diff, weighted)
 
     # Second moments of each output pair (i <= j).
-    log_k = (tf.math.log(pred.signal_variance)[:, None]
+    log_k = (tf.expand_dims(tf.math.log(pred.signal_variance), 1)
              - 0.5 * tf.reduce_sum(tf.square(diff), axis=1))  # [E, n]
     # With A = P^1/2 s P^1/2 + I (P = 1/l_i^2 + 1/l_j^2): R = s P + I has det R = det A
     # and R^-1 s = P^-1/2 (I - A^-1) P^-1/2 =: T, symmetric.
     A_inv, logdet_A = _inv_logdet(s * pred.pair_scale_outer + eye)
     T = (eye - A_inv) * pred.pair_inv_scale_outer
     det_factor = tf.exp(-0.5 * logdet_A)  # [P]
-    log_k_first, log_k_second = tf.gather(log_k, first), tf.gather(log_k, second)
+    # constant one-hot products instead of gathers: exact, and a one-product gradient
+    log_k_first = tf.matmul(_one_hot(first, E, m.dtype), log_k)  # [P, n]
+    log_k_second = tf.matmul(_one_hot(second, E, m.dtype), log_k)
     m_first = m * pred.first_inv_sq_lengthscales  # m / l_i^2, [P, D]
     m_second = m * pred.second_inv_sq_lengthscales  # m / l_j^2, [P, D]
     if pred.weights_constant:
@@ -403,21 +412,23 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
                                    pred.first_centers, pred.second_centers, pred.first_beta,
                                    pred.second_beta, pred.constant_inverse)
     else:
-        iiI = pred.first_centers - m_first[:, :, None]  # (centers - m) / l_i^2, [P, D, n]
-        iiJ = pred.second_centers - m_second[:, :, None]
+        iiI = pred.first_centers - tf.expand_dims(m_first, 2)  # (centers - m) / l_i^2
+        iiJ = pred.second_centers - tf.expand_dims(m_second, 2)
         _, _, leftT, rightT = _pair_exponent_factors(T, iiI, iiJ, log_k_first, log_k_second)
         Q = tf.exp(tf.matmul(leftT, rightT, transpose_a=True))  # [P, n, n]
         if pred.deterministic:
             raw = tf.reduce_sum(pred.first_beta * tf.linalg.matvec(Q, pred.second_beta), axis=-1)
         else:
             raw = tf.reduce_sum(Q * pred.pair_weights, axis=[1, 2])
-    S = tf.gather(det_factor * raw, pair_of)  # [E, E]
+    pair_entries = _one_hot(pair_of.reshape(-1), len(first), m.dtype)  # [E * E, P]
+    S = tf.reshape(tf.linalg.matvec(pair_entries, det_factor * raw), [E, E])
     if pred.deterministic:
         S += tf.constant(deterministic_jitter * np.eye(E), dtype=S.dtype)
     else:
         S += tf.linalg.diag(pred.signal_variance)
-    S -= M[:, None] * M[None, :]
-    return M[None, :], S, tf.transpose(V)
+    M = tf.expand_dims(M, 0)  # [1, E]
+    S -= tf.matmul(M, M, transpose_a=True)
+    return M, S, tf.transpose(V)
 
 
 def moment_match(

@@ -355,12 +355,14 @@ def test_trig_moments_match_monte_carlo(scale):
     assert_rejects("C taken as Cov[x, trig]", C, C_mc, C_se)
 
 
-def test_augment_state_matches_monte_carlo():
+@pytest.mark.parametrize("angles", [[1], [0, 2], [0, 1, 2]], ids=["one", "two", "all"])
+def test_augment_state_matches_monte_carlo(angles):
     m = np.array([[0.4, -1.0, 2.0]])
     s = np.array([[0.5, 0.1, 0.3], [0.1, 0.3, -0.1], [0.3, -0.1, 0.8]])
-    Mf, Sf, Cf = (np_(v) for v in augment_state(m, s, [1]))
+    Mf, Sf, Cf = (np_(v) for v in augment_state(m, s, angles))
+    assert Mf.shape == (1, 3 + len(angles)) and Cf.shape == (3, 3 + len(angles))
     x = gauss(np.random.default_rng(7), m, s)
-    f = features_np(x, [1])
+    f = features_np(x, angles)
     m_mc, m_se = mc_mean(f)
     S_mc, S_se = mc_cov(f)
     C_mc, C_se = mc_cov(x, f)
