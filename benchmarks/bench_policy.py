@@ -11,7 +11,9 @@ Problems (built through the public API only):
 For each it reports the time to trace and compile the objective and its gradient (first
 call of the function L-BFGS-B evaluates), the median seconds per objective + gradient
 over repeats, the seconds of ``optimize_policy(maxiter=10)`` in a fresh process
-(compilation included) and the peak resident memory of that process.
+(compilation included), the peak resident memory of that process, and the operations in
+the horizon loop's body forward and backward (constants left out; the same on every
+machine, so a change's effect on the per-operation overhead can be told from load).
 
 Usage::
 
@@ -100,6 +102,35 @@ def _time_loss_and_gradient(loss, variables, repeats: int, tf_fun_args: dict):
     return float(value), trace, seconds
 
 
+def loop_operations(agent) -> dict:
+    """Operations in the horizon loop's body of the objective + gradient, forward (with the
+    gradient's accumulators) and backward, constants left out: a count that does not
+    depend on the machine's load, unlike the seconds (per-operation overhead is most of a
+    small problem's time)."""
+    import tensorflow as tf
+
+    variables = agent.controller.trainable_variables
+
+    @tf.function(autograph=False)
+    def loss_and_gradient():
+        with tf.GradientTape() as tape:
+            loss = agent._rollout.policy_loss()
+        return loss, tape.gradient(loss, variables)
+
+    graph_def = loss_and_gradient.get_concrete_function().graph.as_graph_def()
+    counts = {"loop_forward_operations": 0, "loop_gradient_operations": 0}
+    for function in graph_def.library.function:
+        name = function.signature.name
+        if not name.startswith("while_body"):
+            continue
+        ops = sum(node.op != "Const" for node in function.node_def)
+        if "_grad_" in name:
+            counts["loop_gradient_operations"] = max(counts["loop_gradient_operations"], ops)
+        elif name.endswith("_rewritten"):  # the forward body that feeds the accumulators
+            counts["loop_forward_operations"] = max(counts["loop_forward_operations"], ops)
+    return counts
+
+
 def time_objective(problem: str, repeats: int, cartpole_data: int):
     """Trace time and per-call seconds of the objective + gradient L-BFGS-B evaluates."""
     import tensorflow as tf
@@ -122,7 +153,7 @@ def time_objective(problem: str, repeats: int, cartpole_data: int):
         fwd.append(time.perf_counter() - t0)
     return {"trace_seconds": trace, "objective_gradient_seconds": float(np.median(seconds)),
             "objective_gradient_min_seconds": float(np.min(seconds)),
-            "objective_seconds": float(np.median(fwd))}
+            "objective_seconds": float(np.median(fwd)), **loop_operations(agent)}
 
 
 def time_baseline(problem: str, repeats: int, cartpole_data: int):
@@ -258,13 +289,14 @@ def main(argv=None):
             time_port(args.port, args.port_python, args.port_repeats))
 
     header = (f"{'problem':<10} {'trace s':>8} {'obj+grad s':>11} {'obj s':>7} "
-              f"{'opt(10) s':>10} {'peak MB':>8}")
+              f"{'opt(10) s':>10} {'peak MB':>8} {'loop ops fwd/grad':>18}")
     print(header)
     print("-" * len(header))
     for problem, r in results["problems"].items():
+        ops = f"{r['loop_forward_operations']}/{r['loop_gradient_operations']}"
         print(f"{problem:<10} {r['trace_seconds']:>8.2f} {r['objective_gradient_seconds']:>11.3f} "
               f"{r['objective_seconds']:>7.3f} {r['optimize_policy_maxiter10_seconds']:>10.2f} "
-              f"{r['peak_memory_mb']:>8.0f}")
+              f"{r['peak_memory_mb']:>8.0f} {ops:>18}")
     for problem, r in results["problems"].items():
         if "baseline_objective_gradient_seconds" in r:
             grad, opt = (r["baseline_objective_gradient_seconds"],
