@@ -260,9 +260,10 @@ def test_the_first_policy_optimisation_can_have_its_own_budget(tmp_path):
 
 
 def test_policy_restarts_can_stop_once_an_episode_is_solved(tmp_path):
-    def restarts_seen(when, gains):
-        exp, agents = experiment(tmp_path / when, config(policy_restarts=3,
-                                                         policy_restart_when=when))
+    def restarts_seen(when, gains, start=1):
+        exp, agents = experiment(tmp_path / f"{when}-{start}-{gains}",
+                                 config(policy_restarts=3, policy_restart_when=when,
+                                        policy_restart_from=start))
         seen = []
         exp.run_random_episode()
         agent = agents[0]
@@ -281,6 +282,16 @@ def test_policy_restarts_can_stop_once_an_episode_is_solved(tmp_path):
     assert restarts_seen("always", [0.0, 0.6, 0.6]) == ([3, 3, 3], 3)
     assert restarts_seen("unsolved", [0.0, 0.6, 0.6]) == ([3, 3, 1], 3)
     assert restarts_seen("unsolved", [0.0, 0.0, 0.0]) == ([3, 3, 3], None)
+    # restarts from episode 3 on (episodes 2-4 are learned): not in episode 2, and a run
+    # solved in episode 2 never restarts
+    assert restarts_seen("unsolved", [0.0, 0.0, 0.0], start=3) == ([1, 3, 3], None)
+    assert restarts_seen("unsolved", [0.6, 0.0, 0.6], start=3) == ([1, 1, 1], 2)
+    assert restarts_seen("always", [0.6, 0.0, 0.6], start=4) == ([1, 1, 3], 2)
+    at = config(policy_restarts=2, policy_restart_when="unsolved", policy_restart_from=5)
+    assert [at.policy_restarts_at(n, False) for n in (2, 4, 5, 8)] == [1, 1, 2, 2]
+    assert at.policy_restarts_at(6, True) == 1
+    with pytest.raises(ValueError, match="policy_restart_from must be a whole number"):
+        config(policy_restart_from=0)
     with pytest.raises(ValueError, match="policy_restart_when must be 'always' or 'unsolved'"):
         config(policy_restart_when="solved")
 

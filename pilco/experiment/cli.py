@@ -25,7 +25,7 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
                          policy_min_rel_improvement: Optional[float] = None,
                          model_min_rel_improvement: Optional[float] = None,
                          policy_early_stop: str = "always",
-                         policy_restart_when: str = "always",
+                         policy_restart_when: str = "always", policy_restart_from: int = 1,
                          policy_warm_start: str = "always",
                          max_data: Optional[int] = None, random_episodes: int = 1,
                          output: str = "runs/run-seed{seed}") -> None:
@@ -53,6 +53,8 @@ def add_common_arguments(parser: argparse.ArgumentParser, *, episodes: int, step
             ("--policy-iters", positive_int, policy_iters,
              "optimiser iterations per policy optimisation"),
             ("--policy-restarts", positive_int, policy_restarts, "policy optimisation restarts"),
+            ("--policy-restart-from", positive_int, policy_restart_from,
+             "episode (1-based, random ones counted) from which --policy-restarts apply"),
             ("--policy-patience", positive_int, 10,
              "iterations for --policy-min-rel-improvement"),
             ("--policy-iters-first", positive_int, None,
@@ -102,6 +104,7 @@ def learning_settings(args: argparse.Namespace) -> Dict[str, Any]:
         policy_min_rel_improvement=args.policy_min_rel_improvement,
         policy_patience=args.policy_patience, policy_early_stop=args.policy_early_stop,
         policy_restart_when=args.policy_restart_when,
+        policy_restart_from=args.policy_restart_from,
         policy_warm_start=args.policy_warm_start,
         policy_iters_first=args.policy_iters_first,
     )

@@ -41,6 +41,11 @@ class ExperimentConfig:
             restarts from random policies run only while no episode has been solved (a
             policy stuck in a poor optimum, e.g. the cart-pole's "swing over the top and
             round again", is left for a better one; once solved, the warm start is kept).
+        policy_restart_from: the restarts run only from episode ``policy_restart_from``
+            on (1-based, random episodes counted; 1: from the first learned episode). With
+            ``policy_restart_when="unsolved"`` a run solved before that episode never
+            restarts, so it costs and learns exactly as without restarts; one still
+            unsolved there gets them (a stuck warm start is what they fix).
         policy_warm_start: ``"always"``: every policy search starts from the policy of
             the episode before; ``"solved"``: only once an episode was solved; before
             that, each learned episode after the first starts from a fresh random policy
@@ -79,6 +84,7 @@ class ExperimentConfig:
     policy_iters_first: Optional[int] = None
     policy_early_stop: str = "always"
     policy_restart_when: str = "always"
+    policy_restart_from: int = 1
     policy_warm_start: str = "always"
     cost_width: float = 0.25
     success_threshold: float = 0.05
@@ -91,7 +97,8 @@ class ExperimentConfig:
 
     def __post_init__(self):
         for name in ("episodes", "steps", "model_iters", "policy_iters", "model_restarts",
-                     "policy_restarts", "policy_patience", "hold_steps"):
+                     "policy_restarts", "policy_patience", "hold_steps",
+                     "policy_restart_from"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
@@ -126,3 +133,14 @@ class ExperimentConfig:
         if self.first_learned(number) and self.policy_iters_first:
             return self.policy_iters_first
         return self.policy_iters
+
+    def policy_restarts_at(self, number: int, solved: bool) -> int:
+        """The policy search's runs (``policy_restarts``, or 1 without restarts) in
+        episode ``number`` (1-based), given whether an earlier episode was solved: the
+        restarts run from episode ``policy_restart_from`` on, and with
+        ``policy_restart_when="unsolved"`` only while nothing was solved."""
+        if number < self.policy_restart_from:
+            return 1
+        if self.policy_restart_when == "unsolved" and solved:
+            return 1
+        return self.policy_restarts

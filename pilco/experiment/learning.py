@@ -42,14 +42,16 @@ def train_model(exp, number: int) -> None:
 def improve_policy(exp, number: int) -> float:
     """``optimize_policy`` with the run's settings; the relative early stop applies always
     or, with ``policy_early_stop="solved"``, once an episode was solved; the restarts
-    run always or, with ``policy_restart_when="unsolved"``, until an episode was solved.
+    run as :meth:`ExperimentConfig.policy_restarts_at` says (from episode
+    ``policy_restart_from`` on; with ``policy_restart_when="unsolved"`` until an episode
+    was solved).
     The search starts from the agent's current policy (see :func:`learn_policy`).
     Returns the predicted return."""
     cfg, agent = exp.config, exp.agent
     iters = cfg.policy_iterations(number)
     solved = exp.solved_at_episode() is not None
     early_stop = cfg.policy_early_stop == "always" or solved
-    restarts = cfg.policy_restarts if cfg.policy_restart_when == "always" or not solved else 1
+    restarts = cfg.policy_restarts_at(number, solved)
     if exp.before_policy_search is not None:
         exp.before_policy_search(agent, number)
     with progress_bar(iters * restarts, f"episode {number} policy", cfg.quiet) as bar:
