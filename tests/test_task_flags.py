@@ -1,5 +1,8 @@
 """Every task refuses a bad numeric flag by name, as an argparse error (exit status 2),
-before any environment, model or TensorFlow work starts."""
+before any environment, model or TensorFlow work starts; a resumed run keeps the settings
+it was saved with."""
+import json
+
 import pytest
 
 from pilco.tasks import adaptation, cartpole, pendulum, reacher
@@ -22,6 +25,7 @@ COMMON = [
     (["--policy-iters", "-5"], "--policy-iters: must be at least 1"),
     (["--policy-iters-first", "0"], "--policy-iters-first: must be at least 1"),
     (["--policy-restarts", "0"], "--policy-restarts: must be at least 1"),
+    (["--policy-restart-from", "0"], "--policy-restart-from: must be at least 1"),
     (["--policy-patience", "0"], "--policy-patience: must be at least 1"),
     (["--model-iters", "1.5"], "--model-iters: expected an integer"),
     (["--model-restarts", "0"], "--model-restarts: must be at least 1"),
@@ -65,3 +69,21 @@ def test_edge_values_are_accepted(task, tmp_path):
     args = PARSERS[task](["--max-data", "0", "--random-episodes", "0", "--seed", "0",
                           "--policy-iters-first", "1", "--output", str(tmp_path)])
     assert (args.max_data, args.random_episodes, args.policy_iters_first) == (0, 0, 1)
+
+
+def test_cartpole_restarts_late_by_default_and_old_runs_resume_as_they_started(tmp_path):
+    args = cartpole.parse_args(["--output", str(tmp_path / "new")])
+    config = cartpole.make_config(args)
+    # no restarts before episode 5, two runs per search from there while unsolved
+    assert [config.policy_restarts_at(n, False) for n in (2, 4, 5, 8)] == [1, 1, 2, 2]
+    assert config.policy_restarts_at(6, True) == 1
+    # a run saved with restarts before --policy-restart-from existed restarted from its
+    # first learned episode; resumed, it still does
+    saved = tmp_path / "saved"
+    saved.mkdir()
+    old = {k: v for k, v in vars(args).items() if k != "policy_restart_from"}
+    old.update(policy_restarts=3, output=str(saved))
+    (saved / "progress.json").write_text(json.dumps({"args": old}))
+    resumed = cartpole.make_config(cartpole.parse_args(["--resume", str(saved)]))
+    assert (resumed.policy_restarts, resumed.policy_restart_from) == (3, 1)
+    assert resumed.policy_restarts_at(2, False) == 3
