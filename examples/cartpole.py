@@ -3,7 +3,8 @@
 8 episodes (1 with random forces, 7 learned) of 40 steps of 0.1 s; the release's
 settings: an RBF policy of 10 basis functions drawn from the start distribution, the
 saturating cost of the pendulum tip's distance to upright (width 0.25 m), BFGS for the
-policy, L-BFGS-B for the GPs, both stopping once they stall. Solved: the tip stays within
+policy, L-BFGS-B for the GPs, both stopping once they stall; a run not solved by episode 5
+adds a search from a random policy per episode until solved. Solved: the tip stays within
 0.1 m of the target for the last 10 steps of an episode. Every setting is a flag
 (``--help``); the task itself is :mod:`pilco.tasks.cartpole`.
 
