@@ -21,6 +21,7 @@ from .protocols import Controller, Reward
 __all__ = [
     "as_2d_float",
     "check_data",
+    "check_noise_scales",
     "check_transitions",
     "check_columns",
     "check_state_row",
@@ -387,6 +388,21 @@ def check_entries(value, size: int, name: str, label: Optional[str] = None) -> n
     if arr.size != size:
         raise ValueError(f"{label or name} must have {size} entries, got {arr.size}")
     _check_finite(arr, name)
+    return arr
+
+
+def check_noise_scales(value, size: int, name: str = "noise_scales") -> np.ndarray:
+    """Per-transition noise-variance factors: ``size`` finite positive numbers [size]; None
+    gives ones."""
+    if value is None:
+        return np.ones(size)
+    arr = _to_numpy(value, name)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D [transitions], got shape {arr.shape}")
+    arr = check_entries(arr, size, name, f"{name} (one factor per transition)")
+    if np.any(arr <= 0):
+        raise ValueError(f"{name} must be positive (factors of the noise variance), got "
+                         f"{arr[arr <= 0][0]!r} at index {int(np.argmax(arr <= 0))}")
     return arr
 
 

@@ -73,6 +73,10 @@ class SavingAgent(StandInAgent):
     as the real agent's is), acting on its data: it fits the action's effect ``b`` in
     ``x' - x = b u`` and aims 60 % of the way to x = 1, so it adapts to a damaged env."""
 
+    def set_data(self, data, noise_scales=None):
+        super().set_data(data)
+        self.noise_scales = np.ones(len(data[0])) if noise_scales is None else noise_scales
+
     def compute_action(self, x):
         X, Y = self.data
         b = float(X[:, 1] @ Y[:, 0] / (X[:, 1] @ X[:, 1]))
@@ -134,7 +138,7 @@ class AdaptationTask(LineTask):
     args = argparse.Namespace(random_episodes=1, healthy_episodes=2, damaged_episodes=3,
                               damaged_joints=[0], damage_mode="stuck", drop_old_data=False,
                               no_stop_when_recovered=False, min_healthy_episodes=1,
-                              damaged_cost="all", damage_input=False)
+                              damaged_cost="all", damage_input=False, old_data_noise=4.0)
 
     def _fields(self, exp):  # as adaptation.make_experiment
         exp.success_fn = adaptation.recovered_within(adaptation.RECOVER_WITHIN)
@@ -267,6 +271,10 @@ def test_a_kill_at_any_write_loses_at_most_the_episode_in_progress(
             k: summary[k] for k in ("solved_at_episode", "success")}, where
         if task_class is AdaptationTask:
             assert (final["damage_at_episode"], final["episodes_to_recover"]) == (3, 2), where
+            # the healthy episodes (1, 2) down-weighted against the damaged ones (3, 4)
+            steps = [e["steps"] for e in final["episodes"]]
+            np.testing.assert_array_equal(resumed.agent.noise_scales,
+                                          np.repeat([4.0, 4.0, 1.0, 1.0], steps), err_msg=where)
         assert arrays.keys() == reference.keys(), where
         for key in reference:
             np.testing.assert_array_equal(arrays[key], reference[key], err_msg=where)

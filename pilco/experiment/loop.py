@@ -107,7 +107,7 @@ class Experiment(RunRecord):
             agent = exp.store.load_agent()
             if agent is None:
                 agent = build_agent(exp.training_data(), exp.start_states())
-            agent.set_data(exp.training_data())
+            exp.give_agent_data(agent)
             exp.agent = agent
         logger.info("resuming %s after episode %d", directory, len(exp.episodes))
         return exp

@@ -57,7 +57,7 @@ def replay_learning(exp, episode: int):
         t0 = time.perf_counter()
         view.episodes = list(exp.episodes[: j - 1])
         view.records = list(exp.records[: j - 1])
-        view.agent.set_data(view.training_data())
+        view.give_agent_data(view.agent)
         train_model(view, j)
         learn_policy(view, j)
         logger.info("replayed the model fit and policy optimisation of episode %d in %.1f s",
@@ -87,7 +87,7 @@ def agent_of_episode(exp, episode: int, replay: bool = False, tolerance: float =
     if not replay and episode == len(exp.episodes):
         agent = exp.store.load_agent()
         if agent is not None:
-            agent.set_data(view.training_data())
+            view.give_agent_data(agent)
             err = action_error(agent, ep)
             if err <= tolerance:
                 view.agent = agent

@@ -25,8 +25,11 @@ class RunRecord:
     they trained, and the run directory they are saved to (see :class:`Experiment`).
 
     Task state that must survive a resume lives in typed attributes:
-    ``train_from_episode`` (1-based: the model learns from this episode on) and
-    ``summary_fields`` (extra fields of the summary, e.g. when a damage happened).
+    ``train_from_episode`` (1-based: the model learns from this episode on),
+    ``older_noise_scale`` and ``older_before_episode`` (the transitions of episodes before
+    ``older_before_episode`` have their noise variance multiplied by ``older_noise_scale``
+    in the model: a large factor down-weights them, e.g. the healthy arm's after a damage)
+    and ``summary_fields`` (extra fields of the summary, e.g. when a damage happened).
     """
 
     def __init__(self, config: ExperimentConfig, directory: str,
@@ -45,6 +48,8 @@ class RunRecord:
         self.cpu_seconds: Dict[int, Dict[str, float]] = {}
         self.wall_seconds = 0.0
         self.train_from_episode = 1
+        self.older_noise_scale = 1.0
+        self.older_before_episode = 1
         self.summary_fields: Dict[str, Any] = {}
         self.interrupted = False
         self.complete = False
@@ -74,6 +79,31 @@ class RunRecord:
         if self.config.max_data is not None:
             X, Y = X[: self.config.max_data], Y[: self.config.max_data]
         return X, Y
+
+    def training_noise_scales(self) -> np.ndarray:
+        """Noise-variance factor of each transition of :meth:`training_data` [N]:
+        ``older_noise_scale`` for the episodes before ``older_before_episode``, else 1;
+        all ones while the data hold no transition of a later episode (older data are
+        down-weighted against newer ones only: scaling every noise variance alike would
+        only change the fit)."""
+        first = self.train_from_episode if self.episodes[self.train_from_episode - 1:] \
+            else len(self.episodes)
+        scales = np.concatenate([
+            np.full(len(e.transitions()[0]),
+                    self.older_noise_scale if number < self.older_before_episode else 1.0)
+            for number, e in enumerate(self.episodes[first - 1:], start=first)])
+        if self.config.max_data is not None:
+            scales = scales[: self.config.max_data]
+        if not np.any(scales == 1.0):
+            scales = np.ones_like(scales)
+        return scales
+
+    def give_agent_data(self, agent) -> None:
+        """``agent.set_data`` with :meth:`training_data` and, when some differ from 1,
+        :meth:`training_noise_scales`."""
+        scales = self.training_noise_scales()
+        agent.set_data(self.training_data(),
+                       **({"noise_scales": scales} if np.any(scales != 1.0) else {}))
 
     def start_states(self) -> np.ndarray:
         """First state of every episode so far, ``[E, D]``."""
@@ -121,7 +151,7 @@ class RunRecord:
             self.seconds[p] += float(seconds.get(p, 0.0))
         self._partial = None
         if self.agent is not None:
-            self.agent.set_data(self.training_data())
+            self.give_agent_data(self.agent)
         self.save()
         logger.info("episode %d (%s): %d steps, final distance %.4f, min %.4f, cost %.2f, "
                     "to target %s; %.1f s interaction, %.1f s model, %.1f s policy",

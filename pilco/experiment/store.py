@@ -162,6 +162,8 @@ def progress_record(exp) -> Dict[str, Any]:
         "cpu_seconds": exp.cpu_seconds,
         "wall_seconds": exp.wall(),
         "train_from_episode": exp.train_from_episode,
+        "older_noise_scale": exp.older_noise_scale,
+        "older_before_episode": exp.older_before_episode,
         "summary_fields": exp.summary_fields,
         "interrupted": exp.interrupted,
         "complete": exp.complete,
@@ -182,4 +184,6 @@ def restore_progress(exp, progress: Dict[str, Any]) -> None:
     legacy = progress.get("extra", {})
     exp.train_from_episode = int(progress.get("train_from_episode",
                                               legacy.get("train_from_episode", 1)))
+    exp.older_noise_scale = float(progress.get("older_noise_scale", 1.0))
+    exp.older_before_episode = int(progress.get("older_before_episode", 1))
     exp.summary_fields = dict(progress.get("summary_fields", legacy.get("summary", {})))

@@ -21,6 +21,15 @@ Hyperparameter safety (documented defaults):
   restored, the noise is raised (unless it is fixed), and a warning is logged;
 - a hyperparameter made non-trainable (``gpflow.set_trainable(p, False)``) keeps the
   value it was given through training, restarts and failures included.
+
+Per-transition noise: ``set_data(data, noise_scales=w)`` gives transition i the noise
+variance ``w[i]`` times its output's noise variance (a heteroscedastic GP; all ones by
+default and after every ``set_data`` without ``w``). A large factor down-weights a
+transition: where better-trusted data disagree with it the posterior follows them, where
+it is alone it still shapes the prediction. Training, :meth:`MGPR.factorize` (so moment
+matching and the policy search), :meth:`MGPR.predict_f` and
+:meth:`MGPR.log_marginal_likelihood` use the factors; they need the plain GPR outputs
+this class builds (not a sparse model).
 """
 from __future__ import annotations
 
@@ -38,6 +47,7 @@ from ..validation import (
     check_data,
     check_gaussian,
     check_min_rel_improvement,
+    check_noise_scales,
     check_positive_float,
     check_positive_int,
     check_ratio_bound,
@@ -79,6 +89,9 @@ class MGPR(gpflow.base.Module):
             tf.Variable(Y[:, i : i + 1], shape=[None, 1], trainable=False, name=f"Y{i}")
             for i in range(self.num_outputs)
         ]
+        # factor of each transition's noise variance [N] (see the module doc)
+        self._noise_scales = tf.Variable(np.ones(len(X)), shape=[None], trainable=False,
+                                         name="noise_scales")
         self.models: List[gpflow.models.GPModel] = self._build_models(X, Y)
         self._optimizer = TrackingScipy()
         self.initialize_hyperparameters()
@@ -138,18 +151,48 @@ class MGPR(gpflow.base.Module):
     def data(self):
         return self.X, self.Y
 
-    def set_data(self, data):
-        """Replace the training data; shapes ``X [N, D]``, ``Y [N, E]`` (N may change).
+    @property
+    def noise_scales(self) -> np.ndarray:
+        """Factor of each transition's noise variance [N] (ones unless :meth:`set_data`
+        was given others)."""
+        return self._noise_scales.numpy().copy()
+
+    def set_data(self, data, noise_scales=None):
+        """Replace the training data; shapes ``X [N, D]``, ``Y [N, E]`` (N may change),
+        ``noise_scales [N]`` positive factors of each transition's noise variance (None:
+        all ones; see the module doc).
 
         Every listener (see :meth:`add_data_listener`) sees the data first and may refuse
         them by raising; the model is then unchanged.
         """
         X, Y = check_data(data, "data", x_dim=self.num_dims, y_dim=self.num_outputs)
+        scales = check_noise_scales(noise_scales, len(X))
+        if np.any(scales != 1.0):
+            self._check_noise_scales_supported()
         for listener in list(self._data_listeners):
             listener(X, Y)
         self._X.assign(X)
         for i, y in enumerate(self._Y):
             y.assign(Y[:, i : i + 1])
+        self._noise_scales.assign(scales)
+
+    def set_noise_scales(self, noise_scales) -> None:
+        """Set the factors of the current transitions' noise variances, ``[N]`` positive
+        (None: all ones), keeping the data."""
+        scales = check_noise_scales(noise_scales, int(tf.shape(self._X)[0]))
+        if np.any(scales != 1.0):
+            self._check_noise_scales_supported()
+        self._noise_scales.assign(scales)
+
+    def _check_noise_scales_supported(self) -> None:
+        if not self._batchable():
+            raise ValueError("noise_scales other than 1 need the plain GPR outputs with "
+                             "squared-exponential kernels and Gaussian likelihoods that MGPR "
+                             "builds; these models were replaced")
+
+    def _scaled(self) -> bool:
+        """Whether some transition's noise factor differs from 1."""
+        return bool(np.any(self._noise_scales.numpy() != 1.0))
 
     def add_data_listener(self, listener: Callable[[np.ndarray, np.ndarray], None]) -> None:
         """Call ``listener(X [N, D], Y [N, E])`` (checked float64 arrays) on every
@@ -176,7 +219,8 @@ class MGPR(gpflow.base.Module):
     def factorize(self) -> moments.Factorization:
         """Input-independent prediction pieces (beta, K^-1) for the current hyperparameters."""
         ell, sf2, sn2 = self.hyperparameters()
-        return moments.factorize(self.X, self.Y, ell, sf2, sn2)
+        return moments.factorize(self.X, self.Y, ell, sf2, sn2,
+                                 noise_scales=tf.convert_to_tensor(self._noise_scales))
 
     # -- prediction -----------------------------------------------------------------------
     def predict_on_noisy_inputs(self, m, s):
@@ -190,6 +234,13 @@ class MGPR(gpflow.base.Module):
 
     def predict_f(self, Xnew):
         """Latent mean and variance at deterministic inputs: [N*, D] -> ([N*, E], [N*, E])."""
+        if self._scaled():  # GPflow's models know one noise variance per output
+            f = self.factorize()
+            Xnew = tf.convert_to_tensor(Xnew, dtype=f.centers.dtype)
+            Ks = moments.se_kernel(Xnew, f.lengthscales, f.variance, f.centers)  # [E, N*, n]
+            mean = tf.transpose(tf.reduce_sum(Ks * f.beta[:, None, :], axis=-1))
+            quad = tf.reduce_sum(tf.matmul(Ks, f.iK) * Ks, axis=-1)  # [E, N*]
+            return mean, tf.transpose(f.variance[:, None] - quad)
         means, vars_ = zip(*(m.predict_f(Xnew) for m in self.models))
         return tf.concat(means, axis=1), tf.concat(vars_, axis=1)
 
@@ -232,12 +283,14 @@ class MGPR(gpflow.base.Module):
             and type(m.mean_function) is gpflow.mean_functions.Zero
             for m in self.models)
 
-    def _batched_losses(self) -> tf.Tensor:
+    def _batched_losses(self, with_penalties: bool = True) -> tf.Tensor:
         """The outputs' training losses [E] (negative log evidence, minus the log prior
         densities, plus the soft bounds of :meth:`_penalty`) as one batched computation:
         the same values as :meth:`_model_loss` of each output, but one [E, N, N] Cholesky
         and a graph of ~1/E the operations, so tracing and compiling it take a fraction of
-        the time (an evaluation itself is not faster: benchmarks/bench_models.py)."""
+        the time (an evaluation itself is not faster: benchmarks/bench_models.py).
+        Each transition's noise variance is scaled by its ``noise_scales`` factor. Without
+        penalties: the outputs' log evidence [E] instead (priors and bounds left out)."""
         models = self.models
         X = tf.convert_to_tensor(self._X)  # [N, D]
         Y = tf.concat([tf.convert_to_tensor(y) for y in self._Y], axis=1)  # [N, E]
@@ -248,13 +301,16 @@ class MGPR(gpflow.base.Module):
         sq = tf.reduce_sum(tf.square(Xs), axis=-1)  # [E, N]
         r2 = sq[:, :, None] + sq[:, None, :] - 2.0 * tf.matmul(Xs, Xs, transpose_b=True)
         K = sf2[:, None, None] * tf.exp(-0.5 * tf.maximum(r2, 0.0))
-        K = tf.linalg.set_diag(K, tf.linalg.diag_part(K) + sn2[:, None])
+        noise = sn2[:, None] * tf.convert_to_tensor(self._noise_scales)[None, :]  # [E, N]
+        K = tf.linalg.set_diag(K, tf.linalg.diag_part(K) + noise)
         L = tf.linalg.cholesky(K)  # [E, N, N]
         alpha = tf.linalg.triangular_solve(L, tf.transpose(Y)[:, :, None], lower=True)
         n = tf.cast(tf.shape(X)[0], X.dtype)
         log_evidence = (-0.5 * tf.reduce_sum(tf.square(alpha), axis=[1, 2])
                         - tf.reduce_sum(tf.math.log(tf.linalg.diag_part(L)), axis=1)
                         - 0.5 * n * np.log(2.0 * np.pi))
+        if not with_penalties:
+            return log_evidence
         loss = -log_evidence + self._penalties(ell, sf2, sn2)
         if any(p.prior is not None for m in models for p in m.trainable_parameters):
             loss -= tf.stack([tf.cast(m.log_prior_density(), X.dtype) for m in models])
@@ -274,6 +330,8 @@ class MGPR(gpflow.base.Module):
 
     def log_marginal_likelihood(self) -> np.ndarray:
         """Log evidence of each output's GP, [E] (priors excluded)."""
+        if self._scaled():
+            return self._batched_losses(with_penalties=False).numpy().astype(np.float64)
         return np.array([float(m.log_marginal_likelihood().numpy()) for m in self.models])
 
     def optimize(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
@@ -296,6 +354,8 @@ class MGPR(gpflow.base.Module):
         patience = check_positive_int(patience, "patience")
         min_rel_improvement = check_min_rel_improvement(min_rel_improvement)
         rng = generator(check_seed(seed))
+        if self._scaled():  # models replaced after the factors were set would ignore them
+            self._check_noise_scales_supported()
         opt = self._optimizer  # one instance: its compiled objective is reused across calls
         groups = self._selection_groups()
         best_losses = [np.inf] * len(groups)

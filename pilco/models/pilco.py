@@ -169,16 +169,20 @@ class PILCO(gpflow.base.Module):
         """Raw ``[x, u]`` rows [N, D + U] -> GP inputs [N, F + U] (angles as sin, cos)."""
         return self._transitions.gp_inputs(X)
 
-    def set_data(self, data):
-        """Replace the transitions ``(X [N, D + U], Y [N, D])`` the dynamics model learns from."""
-        self._transitions.replace(self.mgpr, data)
+    def set_data(self, data, noise_scales=None):
+        """Replace the transitions ``(X [N, D + U], Y [N, D])`` the dynamics model learns
+        from. ``noise_scales [N]``: a positive factor of each transition's noise variance
+        (None: all ones); a large one down-weights a transition, e.g. the data of a robot
+        before it was damaged (``MGPR.set_data``)."""
+        self._transitions.replace(self.mgpr, data, noise_scales)
 
-    def set_gp_data(self, gp_data):
+    def set_gp_data(self, gp_data, noise_scales=None):
         """Give the dynamics model GP inputs and targets ``(X [N, F + U], Y [N, D])``
         directly (angles as sin, cos columns that need not come from any angle). With angle
         dimensions the raw transitions are then unknown: :attr:`data` and :meth:`save`
-        raise a ValueError until :meth:`set_data` gives raw ones."""
-        self._transitions.replace_gp_data(self.mgpr, gp_data)
+        raise a ValueError until :meth:`set_data` gives raw ones. ``noise_scales``: as in
+        :meth:`set_data`."""
+        self._transitions.replace_gp_data(self.mgpr, gp_data, noise_scales)
 
     def one_step_prediction(self, X):
         """Predicted state differences ``x_{t+1} - x_t`` at raw transition inputs.

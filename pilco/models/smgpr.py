@@ -78,6 +78,10 @@ class SMGPR(MGPR):
         return np.array([float(m.maximum_log_likelihood_objective().numpy())
                          for m in self.models])
 
+    def _check_noise_scales_supported(self) -> None:
+        raise ValueError("SMGPR (FITC) has one noise variance per output: noise_scales "
+                         "other than 1 need the exact MGPR")
+
     def _selection_groups(self):
         """The outputs share Z, so restarts are compared on the summed loss."""
         return [(self, list(range(self.num_outputs)))]

@@ -57,23 +57,24 @@ class Transitions:
         D = self.state_dim
         return np.concatenate([angle_features(X[:, :D], self.angle_indices), X[:, D:]], axis=1)
 
-    def replace(self, model, data) -> None:
-        """Set new raw transitions and the matching GP data of ``model`` (an MGPR)."""
+    def replace(self, model, data, noise_scales=None) -> None:
+        """Set new raw transitions and the matching GP data of ``model`` (an MGPR), with
+        ``noise_scales`` [N] (see ``MGPR.set_data``)."""
         X, Y = check_data(data, "data", x_dim=self._X.shape[1], y_dim=self.state_dim)
         old = self._X, self._Y, self._raw_known
         self._X, self._Y, self._raw_known = X, Y, True
         try:
-            model.set_data((self.gp_inputs(X), Y))
+            model.set_data((self.gp_inputs(X), Y), noise_scales=noise_scales)
         except BaseException:
             self._X, self._Y, self._raw_known = old
             raise
 
-    def replace_gp_data(self, model, gp_data) -> None:
+    def replace_gp_data(self, model, gp_data, noise_scales=None) -> None:
         """Give ``model`` GP data ``(X [N, F + U], Y [N, D])`` directly; without angle
         dimensions they are the raw transitions, with angles the raw ones become unknown."""
         self._accept_any = True
         try:
-            model.set_data(gp_data)
+            model.set_data(gp_data, noise_scales=noise_scales)
         finally:
             self._accept_any = False
         if self.angle_indices:

@@ -10,6 +10,9 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
    agent's ``m_init``;
 3. up to ``--damaged-episodes`` learned episodes with the same agent, policy and data
    (``--drop-old-data``: the model then learns from the damaged episodes only;
+   ``--old-data-noise F``: the healthy arm's transitions keep shaping the model, with F
+   times the noise variance of the damaged arm's, so that they give way where the two
+   disagree;
    ``--damaged-cost main``: the policy then optimises the main position cost only),
    stopping once it reaches again (unless ``--no-stop-when-recovered``).
 
@@ -24,7 +27,13 @@ import os
 from typing import Any, Dict, List, Optional, Sequence
 
 from ..experiment import Experiment
-from ..experiment.cli import finish, non_negative_int, parse_task_args, positive_int
+from ..experiment.cli import (
+    finish,
+    non_negative_int,
+    parse_task_args,
+    positive_float,
+    positive_int,
+)
 from . import reacher
 
 __all__ = ["build_parser", "parse_args", "make_experiment", "damage", "learn_the_flag",
@@ -35,7 +44,7 @@ RECOVER_WITHIN = 3
 
 #: settings added after runs were saved, with the value that reproduces such a run
 ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all", min_healthy_episodes=1,
-                   damage_input=False)
+                   damage_input=False, old_data_noise=1.0)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -73,6 +82,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "dimension, 0 before the damage and 1 after, so that the dynamics "
                         "GPs can learn how far the damaged arm's transitions follow the "
                         "healthy arm's (not which joint broke)")
+    g.add_argument("--old-data-noise", type=positive_float, default=1.0, metavar="F",
+                   help="after the damage the model sees the healthy arm's transitions "
+                        "with F times the noise variance of the damaged arm's (F > 1 "
+                        "down-weights them where the two disagree; 1: as equals)")
     for name, text in (("--drop-old-data", "after the damage, learn the model from damaged "
                                            "episodes only"),
                        ("--no-stop-when-recovered", "run all --damaged-episodes even after "
@@ -193,6 +206,8 @@ def run(exp: Experiment, args: argparse.Namespace) -> Dict[str, Any]:
             fields["damage_at_episode"] = len(exp.episodes) + 1
             if args.drop_old_data:
                 exp.train_from_episode = fields["damage_at_episode"]
+            exp.older_noise_scale = args.old_data_noise
+            exp.older_before_episode = fields["damage_at_episode"]
             exp.save_progress()
         else:
             damage(exp, args)  # resuming after the damage: break the fresh env again
