@@ -48,8 +48,9 @@ class StandInAgent:
         self.interrupt_policy_at = interrupt_policy_at
         self.m_init = np.zeros((1, 1))
 
-    def set_data(self, data):
+    def set_data(self, data, noise_scales=None):
         self.data = (np.array(data[0]), np.array(data[1]))
+        self.noise_scales = np.ones(len(data[0])) if noise_scales is None else noise_scales
         self.calls.append(("set_data", len(data[0])))
 
     def optimize_models(self, maxiter, restarts, seed, callback, min_rel_improvement, patience):
@@ -145,6 +146,34 @@ def test_training_from_a_later_episode_and_the_success_rule(tmp_path):
     assert exp.summary()["success"] is False
     exp.run_learned_episode()
     assert exp.summary()["success"] is True
+
+
+@pytest.mark.parametrize("train_from, max_data", [(1, None), (2, None), (1, 9)])
+def test_older_episodes_are_down_weighted_against_newer_ones_only(tmp_path, train_from,
+                                                                   max_data):
+    exp, agents = experiment(tmp_path, config(episodes=5, max_data=max_data))
+    exp.run_random_episode()
+    exp.run_learned_episode()
+    exp.older_noise_scale, exp.older_before_episode = 50.0, 3  # e.g. a damage before 3
+    exp.train_from_episode = train_from
+    old = [e.steps for e in exp.episodes][train_from - 1:]
+    # no transition of episode 3 or later yet: nothing to weigh against, all ones
+    np.testing.assert_array_equal(exp.training_noise_scales(),
+                                  np.ones(len(exp.training_data()[0])))
+    exp.run_learned_episode()
+    new = exp.episodes[2].steps
+    want = np.r_[np.full(sum(old), 50.0), np.ones(new)][:max_data]
+    if not np.any(want == 1.0):  # max_data keeps old transitions only
+        want = np.ones_like(want)
+    np.testing.assert_array_equal(exp.training_noise_scales(), want)
+    np.testing.assert_array_equal(agents[0].noise_scales, want)  # what the agent was given
+    assert len(want) == len(exp.training_data()[0])
+    # a resumed run gives its agent the same factors
+    base, rebuilt = experiment(tmp_path)
+    resumed = Experiment.resume(exp.directory, config(episodes=5, max_data=max_data),
+                                base.build_agent, make_env=LineEnv)
+    assert (resumed.older_noise_scale, resumed.older_before_episode) == (50.0, 3)
+    np.testing.assert_array_equal(rebuilt[0].noise_scales, want)
 
 
 def test_ctrl_c_in_a_rollout_keeps_its_transitions_and_the_run_resumes(tmp_path):

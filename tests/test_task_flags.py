@@ -42,6 +42,8 @@ OWN = [
     ("reacher", ["--render-size", "320", "-1"], "--render-size: must be at least 1"),
     ("adaptation", ["--damaged-episodes", "0"], "--damaged-episodes: must be at least 1"),
     ("adaptation", ["--healthy-episodes", "-1"], "--healthy-episodes: must be at least 0"),
+    ("adaptation", ["--old-data-noise", "0"], "--old-data-noise: must be positive"),
+    ("adaptation", ["--old-data-noise", "inf"], "--old-data-noise: must be positive"),
 ]
 
 
@@ -87,3 +89,10 @@ def test_cartpole_restarts_late_by_default_and_old_runs_resume_as_they_started(t
     resumed = cartpole.make_config(cartpole.parse_args(["--resume", str(saved)]))
     assert (resumed.policy_restarts, resumed.policy_restart_from) == (3, 1)
     assert resumed.policy_restarts_at(2, False) == 3
+
+
+def test_the_adaptation_weighs_old_data_as_equals_unless_told():
+    from pilco.tasks import adaptation
+
+    assert adaptation.parse_args([]).old_data_noise == 1.0
+    assert adaptation.parse_args(["--old-data-noise", "100"]).old_data_noise == 100.0
