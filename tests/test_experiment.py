@@ -325,6 +325,24 @@ def test_policy_restarts_can_stop_once_an_episode_is_solved(tmp_path):
         config(policy_restart_when="solved")
 
 
+@pytest.mark.parametrize("when, gains, want", [
+    ("always", [0.0, 0.6, 0.6], [1e-3, 1e-3, 1e-3]),
+    ("solved", [0.0, 0.6, 0.6], [None, None, 1e-3]),  # solved in episode 3
+    ("solved", [0.0, 0.0, 0.0], [None, None, None]),
+])
+def test_the_policy_early_stop_can_wait_for_a_solved_episode(tmp_path, when, gains, want):
+    exp, agents = experiment(tmp_path, config(policy_early_stop=when,
+                                              policy_min_rel_improvement=1e-3))
+    exp.run_random_episode()
+    for gain in gains:  # gain 0: the episode goes nowhere, unsolved
+        agents[0].gain = gain
+        exp.run_learned_episode()
+    assert [c[2] for c in agents[0].calls if c[0] == "policy"] == want
+    assert exp.config.policy_early_stop_at(False) == want[0]
+    assert exp.config.policy_early_stop_at(True) == 1e-3
+    assert config(policy_min_rel_improvement=None).policy_early_stop_at(True) is None
+
+
 def test_policy_searches_can_start_fresh_until_an_episode_is_solved(tmp_path):
     class Controller:
         def __init__(self):

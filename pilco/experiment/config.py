@@ -134,6 +134,15 @@ class ExperimentConfig:
             return self.policy_iters_first
         return self.policy_iters
 
+    def policy_early_stop_at(self, solved: bool) -> Optional[float]:
+        """The relative early stop of a policy search (its ``min_rel_improvement``),
+        given whether an earlier episode was solved: ``policy_min_rel_improvement``
+        always, or with ``policy_early_stop="solved"`` only once solved (else None: every
+        iteration runs)."""
+        if self.policy_early_stop == "always" or solved:
+            return self.policy_min_rel_improvement
+        return None
+
     def policy_restarts_at(self, number: int, solved: bool) -> int:
         """The policy search's runs (``policy_restarts``, or 1 without restarts) in
         episode ``number`` (1-based), given whether an earlier episode was solved: the

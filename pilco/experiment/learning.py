@@ -40,17 +40,16 @@ def train_model(exp, number: int) -> None:
 
 
 def improve_policy(exp, number: int) -> float:
-    """``optimize_policy`` with the run's settings; the relative early stop applies always
-    or, with ``policy_early_stop="solved"``, once an episode was solved; the restarts
-    run as :meth:`ExperimentConfig.policy_restarts_at` says (from episode
-    ``policy_restart_from`` on; with ``policy_restart_when="unsolved"`` until an episode
-    was solved).
+    """``optimize_policy`` with the run's settings; the relative early stop and the
+    restarts as :meth:`ExperimentConfig.policy_early_stop_at` (always, or with
+    ``policy_early_stop="solved"`` once an episode was solved) and
+    :meth:`ExperimentConfig.policy_restarts_at` say (from episode ``policy_restart_from``
+    on; with ``policy_restart_when="unsolved"`` until an episode was solved).
     The search starts from the agent's current policy (see :func:`learn_policy`).
     Returns the predicted return."""
     cfg, agent = exp.config, exp.agent
     iters = cfg.policy_iterations(number)
     solved = exp.solved_at_episode() is not None
-    early_stop = cfg.policy_early_stop == "always" or solved
     restarts = cfg.policy_restarts_at(number, solved)
     if exp.before_policy_search is not None:
         exp.before_policy_search(agent, number)
@@ -59,7 +58,7 @@ def improve_policy(exp, number: int) -> float:
             maxiter=iters, restarts=restarts,
             seed=exp.episode_seed(number), callback=optimizer_callback(bar),
             method=cfg.policy_method,
-            min_rel_improvement=cfg.policy_min_rel_improvement if early_stop else None,
+            min_rel_improvement=cfg.policy_early_stop_at(solved),
             patience=cfg.policy_patience)
     logger.info("episode %d: predicted return %.3f over %d steps", number, expected,
                 agent.horizon)
