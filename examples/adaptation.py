@@ -3,8 +3,10 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
 
 A random episode and up to 4 learned healthy episodes (until one reaches), then the
 damage (the elbow stuck at its angle; ``--damage-mode zero`` straightens it), then up to
-4 learned damaged episodes (until the arm reaches again; ``--drop-old-data`` makes the
-model forget the healthy episodes). Every reacher setting is a flag too (``--help``); the
+4 learned damaged episodes (until the arm reaches again). The model keeps the healthy
+episodes with 100 times the damaged ones' noise variance, so that it follows the damaged
+arm where the two disagree (``--old-data-noise``; 1 weighs them as equals,
+``--drop-old-data`` forgets them). Every reacher setting is a flag too (``--help``); the
 task is :mod:`pilco.tasks.adaptation`. Figure ``adaptation_distance.png``: the distance
 per step, healthy and damaged episodes.
 

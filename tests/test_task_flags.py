@@ -91,8 +91,17 @@ def test_cartpole_restarts_late_by_default_and_old_runs_resume_as_they_started(t
     assert resumed.policy_restarts_at(2, False) == 3
 
 
-def test_the_adaptation_weighs_old_data_as_equals_unless_told():
+def test_the_adaptation_down_weights_old_data_and_old_runs_resume_as_they_started(tmp_path):
     from pilco.tasks import adaptation
 
-    assert adaptation.parse_args([]).old_data_noise == 1.0
-    assert adaptation.parse_args(["--old-data-noise", "100"]).old_data_noise == 100.0
+    args = adaptation.parse_args(["--output", str(tmp_path / "new")])
+    assert args.old_data_noise == 100.0
+    assert adaptation.parse_args(["--old-data-noise", "1"]).old_data_noise == 1.0
+    # a run saved before the flag existed weighed the healthy data as equals; resumed, it
+    # still does
+    saved = tmp_path / "saved"
+    saved.mkdir()
+    old = {k: v for k, v in vars(args).items() if k != "old_data_noise"}
+    old.update(output=str(saved))
+    (saved / "progress.json").write_text(json.dumps({"args": old}))
+    assert adaptation.parse_args(["--resume", str(saved)]).old_data_noise == 1.0
