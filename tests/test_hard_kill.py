@@ -73,10 +73,6 @@ class SavingAgent(StandInAgent):
     as the real agent's is), acting on its data: it fits the action's effect ``b`` in
     ``x' - x = b u`` and aims 60 % of the way to x = 1, so it adapts to a damaged env."""
 
-    def set_data(self, data, noise_scales=None):
-        super().set_data(data)
-        self.noise_scales = np.ones(len(data[0])) if noise_scales is None else noise_scales
-
     def compute_action(self, x):
         X, Y = self.data
         b = float(X[:, 1] @ Y[:, 0] / (X[:, 1] @ X[:, 1]))

@@ -71,11 +71,17 @@ class RunRecord:
         """Every collected transition: ``X [N, D+U]``, ``Y [N, D]``, episode order."""
         return stack_transitions(self.episodes)
 
+    def _training_episodes(self) -> List[Tuple[int, Episode]]:
+        """``(number, episode)`` of the episodes the model learns from: from
+        ``train_from_episode`` on, at least the last one (numbers 1-based)."""
+        first = (self.train_from_episode if self.episodes[self.train_from_episode - 1:]
+                 else len(self.episodes))
+        return list(enumerate(self.episodes[first - 1:], start=first))
+
     def training_data(self) -> Data:
         """The model's transitions: episodes from ``train_from_episode`` on (at least the
         last one), the first ``max_data`` of them."""
-        X, Y = stack_transitions(self.episodes[self.train_from_episode - 1:]
-                                 or self.episodes[-1:])
+        X, Y = stack_transitions([e for _, e in self._training_episodes()])
         if self.config.max_data is not None:
             X, Y = X[: self.config.max_data], Y[: self.config.max_data]
         return X, Y
@@ -86,12 +92,10 @@ class RunRecord:
         all ones while the data hold no transition of a later episode (older data are
         down-weighted against newer ones only: scaling every noise variance alike would
         only change the fit)."""
-        first = self.train_from_episode if self.episodes[self.train_from_episode - 1:] \
-            else len(self.episodes)
         scales = np.concatenate([
-            np.full(len(e.transitions()[0]),
-                    self.older_noise_scale if number < self.older_before_episode else 1.0)
-            for number, e in enumerate(self.episodes[first - 1:], start=first)])
+            np.full(e.steps, self.older_noise_scale if number < self.older_before_episode
+                    else 1.0)
+            for number, e in self._training_episodes()])
         if self.config.max_data is not None:
             scales = scales[: self.config.max_data]
         if not np.any(scales == 1.0):

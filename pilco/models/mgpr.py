@@ -166,9 +166,7 @@ class MGPR(gpflow.base.Module):
         them by raising; the model is then unchanged.
         """
         X, Y = check_data(data, "data", x_dim=self.num_dims, y_dim=self.num_outputs)
-        scales = check_noise_scales(noise_scales, len(X))
-        if np.any(scales != 1.0):
-            self._check_noise_scales_supported()
+        scales = self._checked_noise_scales(noise_scales, len(X))
         for listener in list(self._data_listeners):
             listener(X, Y)
         self._X.assign(X)
@@ -179,10 +177,16 @@ class MGPR(gpflow.base.Module):
     def set_noise_scales(self, noise_scales) -> None:
         """Set the factors of the current transitions' noise variances, ``[N]`` positive
         (None: all ones), keeping the data."""
-        scales = check_noise_scales(noise_scales, int(tf.shape(self._X)[0]))
+        self._noise_scales.assign(
+            self._checked_noise_scales(noise_scales, int(tf.shape(self._X)[0])))
+
+    def _checked_noise_scales(self, noise_scales, size: int) -> np.ndarray:
+        """``noise_scales`` checked for ``size`` transitions and for this model (factors
+        other than 1 need :meth:`_check_noise_scales_supported`)."""
+        scales = check_noise_scales(noise_scales, size)
         if np.any(scales != 1.0):
             self._check_noise_scales_supported()
-        self._noise_scales.assign(scales)
+        return scales
 
     def _check_noise_scales_supported(self) -> None:
         if not self._batchable():

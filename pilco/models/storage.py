@@ -245,10 +245,10 @@ def restore_dynamics(gp, arrays, trainable, path) -> None:
 def agent_arrays(agent) -> Dict[str, np.ndarray]:
     """Everything :func:`read_agent` needs to rebuild ``agent``, as named arrays.
 
-    Stored: raw data ``X [N, D + U]``, ``Y [N, D]`` and their noise factors ``[N]`` (an
-    exact model's); GP hyperparameters (lengthscales [E, F + U], signal and noise variances
-    [E], inducing inputs Z [M, F + U] for a sparse model) and settings; controller type,
-    settings and parameters; reward type and parameters; horizon, ``m_init`` [1, D],
+    Stored: raw data ``X [N, D + U]``, ``Y [N, D]`` and their noise factors ``[N]``; GP
+    hyperparameters (lengthscales [E, F + U], signal and noise variances [E], inducing
+    inputs Z [M, F + U] for a sparse model) and settings; controller type, settings and
+    parameters; reward type and parameters; horizon, ``m_init`` [1, D],
     ``S_init`` [D, D], angle indices, ``num_induced_points`` and ``policy_input_noise``.
     Raises :class:`TypeError` for components that cannot be stored (custom controllers,
     rewards, squash functions or dynamics models).
@@ -257,8 +257,7 @@ def agent_arrays(agent) -> Dict[str, np.ndarray]:
     trainable: Dict[str, List[bool]] = {}
     X, Y = agent.data
     arrays["data/X"], arrays["data/Y"] = X, Y
-    if not isinstance(agent.mgpr, SMGPR):
-        arrays["data/noise_scales"] = agent.mgpr.noise_scales
+    arrays["data/noise_scales"] = agent.mgpr.noise_scales
     arrays["m_init"] = agent.m_init
     arrays["S_init"] = agent.S_init
     meta = dict(
