@@ -60,6 +60,7 @@ class StandInAgent:
     def optimize_policy(self, maxiter, restarts, seed, callback, method, min_rel_improvement,
                         patience):
         self.calls.append(("policy", seed, min_rel_improvement))
+        self.policy_restarts = getattr(self, "policy_restarts", []) + [restarts]
         if self.interrupt_policy_at == len([c for c in self.calls if c[0] == "policy"]):
             os.kill(os.getpid(), signal.SIGTERM)  # arrives mid-optimisation
         callback(0)

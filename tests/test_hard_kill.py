@@ -134,7 +134,8 @@ class AdaptationTask(LineTask):
     args = argparse.Namespace(random_episodes=1, healthy_episodes=2, damaged_episodes=3,
                               damaged_joints=[0], damage_mode="stuck", drop_old_data=False,
                               no_stop_when_recovered=False, min_healthy_episodes=1,
-                              damaged_cost="all", damage_input=False, old_data_noise=4.0)
+                              damaged_cost="all", damage_input=False, old_data_noise=4.0,
+                              damaged_policy_restarts=1)
 
     def _fields(self, exp):  # as adaptation.make_experiment
         exp.success_fn = adaptation.recovered_within(adaptation.RECOVER_WITHIN)

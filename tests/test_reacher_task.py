@@ -1,6 +1,8 @@
 """The reacher task's own pieces: the joint-limit cost and the checks of its flags."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -285,6 +287,44 @@ def test_the_adaptation_can_keep_only_the_main_cost_after_the_damage(which):
         agent.m_init = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
         assert abs(agent.expected_return() - before) > 1e-6  # the objective changed
     assert adaptation.parse_args([]).damaged_cost == "all"
+
+
+@pytest.mark.parametrize("restarts", [1, 3])
+def test_the_adaptation_restarts_its_policy_search_from_the_second_damaged_episode(
+        tmp_path, monkeypatch, restarts):
+    """``--damaged-policy-restarts N``: episodes 1 (random) and 2 (healthy, reaches) and
+    the first damaged episode 3 (its model knows only the healthy arm) search once;
+    damaged episodes 4 and 5 search N times, also after a resume before episode 5."""
+    import argparse
+
+    from test_hard_kill import AdaptationTask
+
+    monkeypatch.setattr(os, "fsync", lambda fd: None)
+    built = []
+    task = AdaptationTask(built)
+    task.args = argparse.Namespace(**{**vars(AdaptationTask.args), "damaged_episodes": 2,
+                                      "no_stop_when_recovered": True,
+                                      "damaged_policy_restarts": restarts})
+    summary = task.run(task.new(tmp_path))
+    assert summary["damage_at_episode"] == 3 and len(summary["episodes"]) == 4
+    assert built[-1].policy_restarts == [1, 1, restarts]  # episodes 2, 3, 4
+
+    resumed = task.resume(tmp_path)  # a fresh config: no restarts until the damage is known
+    assert resumed.config.policy_restarts == 1
+    task.args.damaged_episodes = 3
+    summary = task.run(resumed)
+    assert len(summary["episodes"]) == 5
+    assert resumed.agent.policy_restarts[-1] == restarts  # episode 5
+    if restarts > 1:
+        assert (resumed.config.policy_restart_from, resumed.config.policy_restart_when) == (
+            4, "always")
+    assert adaptation_defaults().damaged_policy_restarts == 1
+
+
+def adaptation_defaults():
+    from pilco.tasks import adaptation
+
+    return adaptation.parse_args([])
 
 
 def priors_of(agent):

@@ -13,7 +13,9 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
    ``--old-data-noise F``, default 100: the healthy arm's transitions keep shaping the
    model, with F times the noise variance of the damaged arm's, so that they give way
    where the two disagree;
-   ``--damaged-cost main``: the policy then optimises the main position cost only),
+   ``--damaged-cost main``: the policy then optimises the main position cost only;
+   ``--damaged-policy-restarts N``: from the second damaged episode on, the policy
+   search also runs from N - 1 random policies and keeps the best predicted return),
    stopping once it reaches again (unless ``--no-stop-when-recovered``).
 
 The summary adds ``damage_at_episode`` (first episode on the damaged arm) and
@@ -23,6 +25,7 @@ none did). "Success": recovered within :data:`RECOVER_WITHIN` damaged episodes.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 from typing import Any, Dict, List, Optional, Sequence
 
@@ -37,14 +40,15 @@ from ..experiment.cli import (
 from . import reacher
 
 __all__ = ["build_parser", "parse_args", "make_experiment", "damage", "learn_the_flag",
-           "run_healthy", "run", "figures", "main", "RECOVER_WITHIN", "ADDED_LATER"]
+           "run_healthy", "restart_after_damage", "run", "figures", "main", "RECOVER_WITHIN",
+           "ADDED_LATER"]
 
 #: success: the damaged arm reaches again within this many damaged episodes
 RECOVER_WITHIN = 3
 
 #: settings added after runs were saved, with the value that reproduces such a run
 ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all", min_healthy_episodes=1,
-                   damage_input=False, old_data_noise=1.0)
+                   damage_input=False, old_data_noise=1.0, damaged_policy_restarts=1)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -87,6 +91,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="after the damage the model sees the healthy arm's transitions "
                         "with F times the noise variance of the damaged arm's, so that "
                         "they give way where the two disagree (default 100; 1: as equals)")
+    g.add_argument("--damaged-policy-restarts", type=positive_int, default=1, metavar="N",
+                   help="from the second damaged episode on (the first one's model knows "
+                        "only the healthy arm), run each policy search from the previous "
+                        "policy and from N - 1 random ones, keeping the best predicted "
+                        "return (default 1: no restarts; replaces --policy-restarts then)")
     for name, text in (("--drop-old-data", "after the damage, learn the model from damaged "
                                            "episodes only"),
                        ("--no-stop-when-recovered", "run all --damaged-episodes even after "
@@ -166,6 +175,18 @@ def learn_the_flag(agent, lengthscale: float = 1.0, ignored: float = 100.0) -> N
     agent.mgpr.add_data_listener(on_new_data)
 
 
+def restart_after_damage(exp: Experiment, args: argparse.Namespace, first: int) -> None:
+    """With ``--damaged-policy-restarts N`` > 1: the policy searches of episodes
+    ``first + 1`` on (``first``: the first damaged episode, whose model has seen only the
+    healthy arm) run N times, the last policy and N - 1 random ones, in every episode.
+    Applied again on resume; without the flag the run's own restart settings stay."""
+    if args.damaged_policy_restarts <= 1:
+        return
+    exp.config = dataclasses.replace(exp.config, policy_restarts=args.damaged_policy_restarts,
+                                     policy_restart_when="always",
+                                     policy_restart_from=first + 1)
+
+
 def _learned_solved(exp: Experiment) -> bool:
     return any(not r["random"] and exp.episode_solved(e)
                for r, e in zip(exp.records, exp.episodes))
@@ -213,6 +234,7 @@ def run(exp: Experiment, args: argparse.Namespace) -> Dict[str, Any]:
         else:
             damage(exp, args)  # resuming after the damage: break the fresh env again
         first = fields["damage_at_episode"]
+        restart_after_damage(exp, args, first)
         # also on resume: a run killed after an episode's files but before this field's
         # save counts its recovery from the episodes themselves
         fields["episodes_to_recover"] = _recovered_after(exp, first)
