@@ -299,6 +299,8 @@ def test_the_adaptation_restarts_its_policy_search_from_the_second_damaged_episo
 
     from test_hard_kill import AdaptationTask
 
+    from pilco.tasks import adaptation
+
     monkeypatch.setattr(os, "fsync", lambda fd: None)
     built = []
     task = AdaptationTask(built)
@@ -318,13 +320,7 @@ def test_the_adaptation_restarts_its_policy_search_from_the_second_damaged_episo
     if restarts > 1:
         assert (resumed.config.policy_restart_from, resumed.config.policy_restart_when) == (
             4, "always")
-    assert adaptation_defaults().damaged_policy_restarts == 1
-
-
-def adaptation_defaults():
-    from pilco.tasks import adaptation
-
-    return adaptation.parse_args([])
+    assert adaptation.parse_args([]).damaged_policy_restarts == 1  # off by default
 
 
 def priors_of(agent):
