@@ -47,6 +47,7 @@ class StandInAgent:
         self.gain = gain
         self.interrupt_policy_at = interrupt_policy_at
         self.m_init = np.zeros((1, 1))
+        self.policy_restarts = []  # the restarts each policy search was asked for
 
     def set_data(self, data, noise_scales=None):
         self.data = (np.array(data[0]), np.array(data[1]))
@@ -60,7 +61,7 @@ class StandInAgent:
     def optimize_policy(self, maxiter, restarts, seed, callback, method, min_rel_improvement,
                         patience):
         self.calls.append(("policy", seed, min_rel_improvement))
-        self.policy_restarts = getattr(self, "policy_restarts", []) + [restarts]
+        self.policy_restarts.append(restarts)
         if self.interrupt_policy_at == len([c for c in self.calls if c[0] == "policy"]):
             os.kill(os.getpid(), signal.SIGTERM)  # arrives mid-optimisation
         callback(0)

@@ -74,8 +74,7 @@ class RunRecord:
     def _training_episodes(self) -> List[Tuple[int, Episode]]:
         """``(number, episode)`` of the episodes the model learns from: from
         ``train_from_episode`` on, at least the last one (numbers 1-based)."""
-        first = (self.train_from_episode if self.episodes[self.train_from_episode - 1:]
-                 else len(self.episodes))
+        first = min(self.train_from_episode, len(self.episodes))
         return list(enumerate(self.episodes[first - 1:], start=first))
 
     def training_data(self) -> Data:
