@@ -190,12 +190,25 @@ def test_a_run_saved_before_a_setting_existed_resumes_without_it(tmp_path):
                               ).early_start_var == 0.2
 
 
-def test_the_adaptation_keeps_the_earlier_single_cost():
+def test_the_adaptation_has_the_fine_cost_and_no_limit_bumps(tmp_path):
+    import json
+
     from pilco.tasks import adaptation
 
-    args = adaptation.parse_args([])
-    assert args.fine_cost_width is None and args.limit_cost == 0.0
+    args = adaptation.parse_args(["--output", str(tmp_path / "new")])
+    assert args.fine_cost_width == 0.05 and args.limit_cost == 0.0
+    agent = reacher.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
+        (np.zeros((3, 17)), np.zeros((3, 10))), np.zeros((1, 10)))
+    terms = agent.reward.base_rewards
+    assert [type(t).__name__ for t in terms] == ["ExponentialReward"] * 2
+    np.testing.assert_allclose(terms[1].W.numpy(), reacher.position_weights(10, 0.05))
     assert adaptation.parse_args(["--limit-cost", "0.1"]).limit_cost == 0.1
+    # a run saved while the adaptation had no fine cost (null) resumes without it
+    run = tmp_path / "old"
+    run.mkdir()
+    (run / "progress.json").write_text(json.dumps({"args": dict(vars(args),
+                                                                fine_cost_width=None)}))
+    assert adaptation.parse_args(["--resume", str(run)]).fine_cost_width is None
 
 
 class _HealthyRun:
