@@ -84,16 +84,17 @@ def factorize(
     """Cholesky-based pieces of E exact GPs sharing inputs X.
 
     Shapes: X [n, D], Y [n, E], lengthscales [E, D], variance [E], noise [E],
-    noise_scales [n] or None -> Factorization(centers [n, D], beta [E, n], iK [E, n, n] or
-    None, ...). With ``noise_scales`` transition i of output e has the noise variance
-    ``noise[e] * noise_scales[i]`` (a heteroscedastic GP); None means all ones.
+    noise_scales [n] or [E, n] or None -> Factorization(centers [n, D], beta [E, n],
+    iK [E, n, n] or None, ...). With ``noise_scales`` transition i of output e has the
+    noise variance ``noise[e] * noise_scales[i]`` (or ``noise_scales[e, i]``: a
+    heteroscedastic GP); None means all ones.
     """
     n = tf.shape(X)[0]
     K = se_kernel(X, lengthscales, variance)
     if noise_scales is None:
         K += noise[:, None, None] * tf.eye(n, dtype=K.dtype)[None]
     else:
-        K = tf.linalg.set_diag(K, tf.linalg.diag_part(K) + noise[:, None] * noise_scales[None, :])
+        K = tf.linalg.set_diag(K, tf.linalg.diag_part(K) + noise[:, None] * noise_scales)
     L = tf.linalg.cholesky(K)
     beta = tf.linalg.cholesky_solve(L, tf.transpose(Y)[:, :, None])[:, :, 0]
     iK = None

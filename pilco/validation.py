@@ -391,18 +391,30 @@ def check_entries(value, size: int, name: str, label: Optional[str] = None) -> n
     return arr
 
 
-def check_noise_scales(value, size: int, name: str = "noise_scales") -> np.ndarray:
-    """Per-transition noise-variance factors: ``size`` finite positive numbers [size]; None
-    gives ones."""
+def check_noise_scales(value, size: int, name: str = "noise_scales",
+                       outputs: Optional[int] = None) -> np.ndarray:
+    """Noise-variance factors: ``size`` finite positive numbers, one per transition
+    ``[size]``, or, given ``outputs``, one per output and transition ``[outputs, size]``
+    (returned in the shape given); None gives ones ``[size]``."""
     if value is None:
         return np.ones(size)
     arr = _to_numpy(value, name)
-    if arr.ndim != 1:
-        raise ValueError(f"{name} must be 1-D [transitions], got shape {arr.shape}")
-    arr = check_entries(arr, size, name, f"{name} (one factor per transition)")
+    if arr.ndim == 2 and outputs is not None:
+        if arr.shape != (outputs, size):
+            raise ValueError(f"{name} per output must have shape [outputs, transitions] = "
+                             f"[{outputs}, {size}], got {arr.shape}")
+        _check_finite(arr, name)
+    elif arr.ndim != 1:
+        shapes = "1-D [transitions]" + (" or 2-D [outputs, transitions]"
+                                        if outputs is not None else "")
+        raise ValueError(f"{name} must be {shapes}, got shape {arr.shape}")
+    else:
+        arr = check_entries(arr, size, name, f"{name} (one factor per transition)")
     if np.any(arr <= 0):
+        at = np.argwhere(arr <= 0)[0]
         raise ValueError(f"{name} must be positive (factors of the noise variance), got "
-                         f"{arr[arr <= 0][0]!r} at index {int(np.argmax(arr <= 0))}")
+                         f"{arr[tuple(at)]!r} at index "
+                         f"{int(at[0]) if arr.ndim == 1 else tuple(int(i) for i in at)}")
     return arr
 
 

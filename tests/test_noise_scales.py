@@ -2,7 +2,8 @@
 transition i has ``w[i]`` times its output's noise variance. Checked against the
 heteroscedastic GP's formulas written out in NumPy, against the unscaled model (factors of
 1 change nothing), by what a large factor does to a prediction, and through validation,
-the sparse model and the agent file."""
+the sparse model and the agent file; per output (``w [E, N]``) against each output's own
+heteroscedastic GP."""
 from __future__ import annotations
 
 import numpy as np
@@ -90,6 +91,45 @@ def test_every_computation_uses_the_factors():
     np.testing.assert_allclose(M.numpy()[0], mean[0], rtol=1e-6, atol=1e-9)
 
 
+def test_factors_per_output_give_each_output_its_own_heteroscedastic_gp():
+    """``w [E, N]``: output e is the GP with factors ``w[e]``, in every computation
+    (factorisation, GPflow-free prediction, evidence, training loss, moment matching)."""
+    gp = model()
+    w = np.stack([np.linspace(0.5, 40.0, 25), np.linspace(30.0, 1.0, 25)])
+    gp.set_data(gp.data, noise_scales=w)
+    np.testing.assert_array_equal(gp.noise_scales, w)
+    Xs = data(seed=3, N=6)[0]
+    f = gp.factorize()
+    mean, var = (t.numpy() for t in gp.predict_f(Xs))
+    M, S, _ = gp.predict_on_noisy_inputs(Xs[:1], 0.05 * np.eye(3))
+    for e in range(2):
+        ref = heteroscedastic(gp, w[e], Xs)[e]
+        np.testing.assert_allclose(f.beta.numpy()[e], ref["beta"], rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(f.iK.numpy()[e], ref["iK"], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(mean[:, e], ref["mean"], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(var[:, e], ref["var"], rtol=1e-8, atol=1e-12)
+        np.testing.assert_allclose(gp.log_marginal_likelihood()[e], ref["log_evidence"],
+                                   rtol=1e-10)
+        np.testing.assert_allclose(gp._model_losses()[e], -ref["log_evidence"], rtol=1e-8)
+        # output e's moments equal those of a model with w[e] for every output
+        alike = model()
+        alike.set_data(alike.data, noise_scales=w[e])
+        M1, S1, _ = alike.predict_on_noisy_inputs(Xs[:1], 0.05 * np.eye(3))
+        np.testing.assert_allclose(M.numpy()[0, e], M1.numpy()[0, e], rtol=1e-10)
+        np.testing.assert_allclose(S.numpy()[e, e], S1.numpy()[e, e], rtol=1e-10)
+    # identical rows are the same as one row: reported as [N]
+    gp.set_noise_scales(np.stack([w[0], w[0]]))
+    np.testing.assert_array_equal(gp.noise_scales, w[0])
+    np.testing.assert_array_equal(gp.factorize().beta.numpy(),
+                                  heteroscedastic_beta(gp, w[0]))
+
+
+def heteroscedastic_beta(gp, w):
+    g = model()
+    g.set_data(gp.data, noise_scales=w)
+    return g.factorize().beta.numpy()
+
+
 def test_a_large_factor_lets_better_trusted_data_win_where_they_disagree():
     """Old transitions say y = x; new ones, on part of the same inputs, say y = 0. With
     equal factors the prediction there is a compromise; with the old ones' noise 1e4 times
@@ -136,7 +176,10 @@ def test_training_with_factors_fits_the_trusted_data():
 
 @pytest.mark.parametrize("bad, error, message", [
     (np.ones(24), ValueError, "must have 25 entries"),
-    (np.ones((25, 1)), ValueError, "must be 1-D"),
+    (np.ones((25, 1)), ValueError, r"per output must have shape \[outputs, transitions\]"),
+    (np.ones((2, 24)), ValueError, r"\[2, 25\], got \(2, 24\)"),
+    (np.ones((1, 2, 25)), ValueError, "must be 1-D .* or 2-D"),
+    (np.c_[np.ones((2, 24)), [1.0, -1.0]], ValueError, r"positive.*at index \(1, 24\)"),
     (np.r_[np.ones(24), 0.0], ValueError, "must be positive"),
     (np.r_[np.ones(24), -2.0], ValueError, "must be positive"),
     (np.r_[np.ones(24), np.nan], ValueError, "NaN"),
@@ -177,6 +220,11 @@ def test_the_agent_passes_factors_on_and_its_file_keeps_them(tmp_path):
     np.testing.assert_array_equal(a.mgpr.noise_scales, w)
     loaded = PILCO.load(a.save(tmp_path / "agent.npz"))
     np.testing.assert_array_equal(loaded.mgpr.noise_scales, w)
+    assert loaded.expected_return() == pytest.approx(a.expected_return(), rel=1e-12)
+    per_output = np.stack([w, np.ones(12)])
+    a.set_data(a.data, noise_scales=per_output)
+    loaded = PILCO.load(a.save(tmp_path / "per-output.npz"))
+    np.testing.assert_array_equal(loaded.mgpr.noise_scales, per_output)
     assert loaded.expected_return() == pytest.approx(a.expected_return(), rel=1e-12)
     a.set_data(a.data)  # data without factors: all ones
     np.testing.assert_array_equal(PILCO.load(a.save(tmp_path / "b.npz")).mgpr.noise_scales,

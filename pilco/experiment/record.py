@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -28,7 +28,8 @@ class RunRecord:
     ``train_from_episode`` (1-based: the model learns from this episode on),
     ``older_noise_scale`` and ``older_before_episode`` (the transitions of episodes before
     ``older_before_episode`` have their noise variance multiplied by ``older_noise_scale``
-    in the model: a large factor down-weights them, e.g. the healthy arm's after a damage)
+    in the model: a large factor down-weights them, e.g. the healthy arm's after a damage;
+    a list gives each state dimension's GP its own factor)
     and ``summary_fields`` (extra fields of the summary, e.g. when a damage happened).
     """
 
@@ -48,7 +49,8 @@ class RunRecord:
         self.cpu_seconds: Dict[int, Dict[str, float]] = {}
         self.wall_seconds = 0.0
         self.train_from_episode = 1
-        self.older_noise_scale = 1.0
+        #: float, or one float per state dimension (its output GP's factor)
+        self.older_noise_scale: Union[float, List[float]] = 1.0
         self.older_before_episode = 1
         self.summary_fields: Dict[str, Any] = {}
         self.interrupted = False
@@ -86,20 +88,20 @@ class RunRecord:
         return X, Y
 
     def training_noise_scales(self) -> np.ndarray:
-        """Noise-variance factor of each transition of :meth:`training_data` [N]:
+        """Noise-variance factor of each transition of :meth:`training_data`, [N] (or
+        [D, N] when ``older_noise_scale`` is a list, one factor per output GP):
         ``older_noise_scale`` for the episodes before ``older_before_episode``, else 1;
         all ones while the data hold no transition of a later episode (older data are
         down-weighted against newer ones only: scaling every noise variance alike would
         only change the fit)."""
-        scales = np.concatenate([
-            np.full(e.steps, self.older_noise_scale if number < self.older_before_episode
-                    else 1.0)
-            for number, e in self._training_episodes()])
+        older = np.asarray(self.older_noise_scale, dtype=float)
+        old = np.concatenate([np.full(e.steps, number < self.older_before_episode)
+                              for number, e in self._training_episodes()])
         if self.config.max_data is not None:
-            scales = scales[: self.config.max_data]
-        if not np.any(scales == 1.0):
-            scales = np.ones_like(scales)
-        return scales
+            old = old[: self.config.max_data]
+        if np.all(old):
+            old = np.zeros_like(old)
+        return np.where(old, older[..., None] if older.ndim else older, 1.0)
 
     def give_agent_data(self, agent) -> None:
         """``agent.set_data`` with :meth:`training_data` and, when some differ from 1,

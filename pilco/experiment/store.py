@@ -184,6 +184,8 @@ def restore_progress(exp, progress: Dict[str, Any]) -> None:
     legacy = progress.get("extra", {})
     exp.train_from_episode = int(progress.get("train_from_episode",
                                               legacy.get("train_from_episode", 1)))
-    exp.older_noise_scale = float(progress.get("older_noise_scale", 1.0))
+    older = progress.get("older_noise_scale", 1.0)
+    exp.older_noise_scale = ([float(f) for f in older] if isinstance(older, list)
+                             else float(older))
     exp.older_before_episode = int(progress.get("older_before_episode", 1))
     exp.summary_fields = dict(progress.get("summary_fields", legacy.get("summary", {})))

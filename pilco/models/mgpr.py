@@ -24,7 +24,9 @@ Hyperparameter safety (documented defaults):
 
 Per-transition noise: ``set_data(data, noise_scales=w)`` gives transition i the noise
 variance ``w[i]`` times its output's noise variance (a heteroscedastic GP; all ones by
-default and after every ``set_data`` without ``w``). A large factor down-weights a
+default and after every ``set_data`` without ``w``); ``w [E, N]`` gives each output its
+own factors, ``w[e, i]`` for output e (e.g. old data forgotten by the outputs they
+contradict and kept by the others). A large factor down-weights a
 transition: where better-trusted data disagree with it the posterior follows them, where
 it is alone it still shapes the prediction. Training, :meth:`MGPR.factorize` (so moment
 matching and the policy search), :meth:`MGPR.predict_f` and
@@ -89,8 +91,9 @@ class MGPR(gpflow.base.Module):
             tf.Variable(Y[:, i : i + 1], shape=[None, 1], trainable=False, name=f"Y{i}")
             for i in range(self.num_outputs)
         ]
-        # factor of each transition's noise variance [N] (see the module doc)
-        self._noise_scales = tf.Variable(np.ones(len(X)), shape=[None], trainable=False,
+        # factor of each output's and transition's noise variance [E, N] (module doc)
+        self._noise_scales = tf.Variable(np.ones((self.num_outputs, len(X))),
+                                         shape=[self.num_outputs, None], trainable=False,
                                          name="noise_scales")
         self.models: List[gpflow.models.GPModel] = self._build_models(X, Y)
         self._optimizer = TrackingScipy()
@@ -153,14 +156,17 @@ class MGPR(gpflow.base.Module):
 
     @property
     def noise_scales(self) -> np.ndarray:
-        """Factor of each transition's noise variance [N] (ones unless :meth:`set_data`
-        was given others)."""
-        return self._noise_scales.numpy().copy()
+        """Factor of each transition's noise variance: [N] when every output has the same
+        factors (ones unless :meth:`set_data` was given others), else [E, N]."""
+        scales = self._noise_scales.numpy().copy()
+        if np.all(scales == scales[:1]):
+            return scales[0]
+        return scales
 
     def set_data(self, data, noise_scales=None):
         """Replace the training data; shapes ``X [N, D]``, ``Y [N, E]`` (N may change),
-        ``noise_scales [N]`` positive factors of each transition's noise variance (None:
-        all ones; see the module doc).
+        ``noise_scales`` positive factors of each transition's noise variance, [N] or per
+        output [E, N] (None: all ones; see the module doc).
 
         Every listener (see :meth:`add_data_listener`) sees the data first and may refuse
         them by raising; the model is then unchanged.
@@ -175,18 +181,18 @@ class MGPR(gpflow.base.Module):
         self._noise_scales.assign(scales)
 
     def set_noise_scales(self, noise_scales) -> None:
-        """Set the factors of the current transitions' noise variances, ``[N]`` positive
-        (None: all ones), keeping the data."""
+        """Set the factors of the current transitions' noise variances, ``[N]`` or
+        ``[E, N]`` positive (None: all ones), keeping the data."""
         self._noise_scales.assign(
             self._checked_noise_scales(noise_scales, int(tf.shape(self._X)[0])))
 
     def _checked_noise_scales(self, noise_scales, size: int) -> np.ndarray:
         """``noise_scales`` checked for ``size`` transitions and for this model (factors
-        other than 1 need :meth:`_check_noise_scales_supported`)."""
-        scales = check_noise_scales(noise_scales, size)
+        other than 1 need :meth:`_check_noise_scales_supported`), as [E, size]."""
+        scales = check_noise_scales(noise_scales, size, outputs=self.num_outputs)
         if np.any(scales != 1.0):
             self._check_noise_scales_supported()
-        return scales
+        return np.broadcast_to(scales, (self.num_outputs, size)).copy()
 
     def _check_noise_scales_supported(self) -> None:
         if not self._batchable():
@@ -305,7 +311,7 @@ class MGPR(gpflow.base.Module):
         sq = tf.reduce_sum(tf.square(Xs), axis=-1)  # [E, N]
         r2 = sq[:, :, None] + sq[:, None, :] - 2.0 * tf.matmul(Xs, Xs, transpose_b=True)
         K = sf2[:, None, None] * tf.exp(-0.5 * tf.maximum(r2, 0.0))
-        noise = sn2[:, None] * tf.convert_to_tensor(self._noise_scales)[None, :]  # [E, N]
+        noise = sn2[:, None] * tf.convert_to_tensor(self._noise_scales)  # [E, N]
         K = tf.linalg.set_diag(K, tf.linalg.diag_part(K) + noise)
         L = tf.linalg.cholesky(K)  # [E, N, N]
         alpha = tf.linalg.triangular_solve(L, tf.transpose(Y)[:, :, None], lower=True)

@@ -173,7 +173,8 @@ class PILCO(gpflow.base.Module):
         """Replace the transitions ``(X [N, D + U], Y [N, D])`` the dynamics model learns
         from. ``noise_scales [N]``: a positive factor of each transition's noise variance
         (None: all ones); a large one down-weights a transition, e.g. the data of a robot
-        before it was damaged (``MGPR.set_data``)."""
+        before it was damaged; ``[D, N]``: one factor per state dimension's GP and
+        transition (``MGPR.set_data``)."""
         self._transitions.replace(self.mgpr, data, noise_scales)
 
     def set_gp_data(self, gp_data, noise_scales=None):

@@ -12,7 +12,10 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
    (``--drop-old-data``: the model then learns from the damaged episodes only;
    ``--old-data-noise F``, default 100: the healthy arm's transitions keep shaping the
    model, with F times the noise variance of the damaged arm's, so that they give way
-   where the two disagree;
+   where the two disagree; ``--changed-output-noise G``: from the second damaged
+   episode on, the state dimensions whose first damaged episode the healthy model
+   explained badly (:func:`output_disagreement` above ``--changed-output-threshold``) see
+   them with G times the noise variance instead, the others with F;
    ``--damaged-cost main``: the policy then optimises the main position cost only;
    ``--damaged-policy-restarts N``: from the second damaged episode on, the policy
    search also runs from N - 1 random policies and keeps the best predicted return),
@@ -26,10 +29,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import os
 from typing import Any, Dict, List, Optional, Sequence
 
-from ..experiment import Experiment
+import numpy as np
+
+from ..experiment import Experiment, stack_transitions
 from ..experiment.cli import (
     finish,
     non_negative_int,
@@ -40,15 +46,19 @@ from ..experiment.cli import (
 from . import reacher
 
 __all__ = ["build_parser", "parse_args", "make_experiment", "damage", "learn_the_flag",
+           "output_disagreement", "per_output_noise",
            "run_healthy", "restart_after_damage", "run", "figures", "main", "RECOVER_WITHIN",
            "ADDED_LATER"]
+
+logger = logging.getLogger(__name__)
 
 #: success: the damaged arm reaches again within this many damaged episodes
 RECOVER_WITHIN = 3
 
 #: settings added after runs were saved, with the value that reproduces such a run
 ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all", min_healthy_episodes=1,
-                   damage_input=False, old_data_noise=1.0, damaged_policy_restarts=1)
+                   damage_input=False, old_data_noise=1.0, damaged_policy_restarts=1,
+                   changed_output_noise=None, changed_output_threshold=10.0)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -92,6 +102,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="after the damage the model sees the healthy arm's transitions "
                         "with F times the noise variance of the damaged arm's, so that "
                         "they give way where the two disagree (default 100; 1: as equals)")
+    g.add_argument("--changed-output-noise", type=positive_float, default=None, metavar="G",
+                   help="from the second damaged episode on, the state dimensions whose "
+                        "first damaged episode the healthy model explained badly (mean "
+                        "squared standardised one-step error above "
+                        "--changed-output-threshold) see the healthy arm's transitions with "
+                        "G times the noise variance, the others with --old-data-noise "
+                        "(default: off, --old-data-noise for all)")
+    g.add_argument("--changed-output-threshold", type=positive_float, default=10.0,
+                   metavar="Z2",
+                   help="mean squared standardised one-step error of the healthy model on "
+                        "the first damaged episode above which a state dimension counts as "
+                        "changed by the damage")
     g.add_argument("--damaged-policy-restarts", type=positive_int, default=1, metavar="N",
                    help="from the second damaged episode on (the first one's model knows "
                         "only the healthy arm), run each policy search from the previous "
@@ -160,7 +182,6 @@ def learn_the_flag(agent, lengthscale: float = 1.0, ignored: float = 100.0) -> N
     :func:`~pilco.tasks.reacher.ignore_constant_inputs` gave it while it was constant, so
     that the next fit learns how far each output of the damaged arm follows the healthy
     arm's data (from a long lengthscale the fit's gradient would be ~0)."""
-    import numpy as np
 
     column = agent.state_dim - 1  # the reacher's GP inputs: the state, then the action
 
@@ -174,6 +195,55 @@ def learn_the_flag(agent, lengthscale: float = 1.0, ignored: float = 100.0) -> N
                 model.kernel.lengthscales.assign(ell)
 
     agent.mgpr.add_data_listener(on_new_data)
+
+
+def output_disagreement(agent, known, new) -> np.ndarray:
+    """How badly ``agent``'s dynamics model, learning from the transitions ``known`` only,
+    explains the transitions ``new``, per state dimension [D]: the mean over ``new`` of
+    ``(Δx - mean)^2 / var`` with the one-step prediction of a model with the agent's
+    hyperparameters conditioned on ``known`` (``var`` includes the noise). About 1 where
+    that model knew the dynamics. Shapes: ``known``, ``new`` = (X [N, D + U], Y [N, D])."""
+    from ..models import MGPR
+
+    X, Y = known
+    Xn, Yn = new
+    trained = agent.mgpr
+    model = MGPR((agent.gp_inputs(X), Y), noise_floor=trained.noise_floor)
+    for mine, theirs in zip(model.models, trained.models):
+        mine.kernel.lengthscales.assign(theirs.kernel.lengthscales.numpy())
+        mine.kernel.variance.assign(theirs.kernel.variance.numpy())
+        mine.likelihood.variance.assign(theirs.likelihood.variance.numpy())
+    mean, var = (np.asarray(t) for t in model.predict_f(agent.gp_inputs(Xn)))
+    var = var + np.asarray(model.noise_variance)
+    return np.mean((Yn - mean) ** 2 / var, axis=0)
+
+
+def per_output_noise(exp: Experiment, args: argparse.Namespace, first: int) -> None:
+    """With ``--changed-output-noise G``, once the first damaged episode (``first``) ran
+    and before the model learns from it: each state dimension's factor of the healthy
+    arm's transitions is G where :func:`output_disagreement` of the healthy model (the
+    agent's hyperparameters are still those fitted to the healthy episodes) on that
+    episode exceeds ``--changed-output-threshold``, else ``--old-data-noise``; the agent
+    gets its data with the new factors. The factors are kept in the run's state, the
+    disagreement in the summary (``output_disagreement``)."""
+    fields = exp.summary_fields
+    if (args.changed_output_noise is None or len(exp.episodes) < first
+            or fields.get("output_disagreement") is not None):
+        return
+    known = stack_transitions(exp.episodes[exp.train_from_episode - 1:first - 1])
+    if exp.config.max_data is not None:
+        known = tuple(a[: exp.config.max_data] for a in known)
+    if len(known[0]) == 0:  # --drop-old-data: no healthy transition to weigh
+        return
+    z2 = output_disagreement(exp.agent, known, exp.episodes[first - 1].transitions())
+    changed = z2 > args.changed_output_threshold
+    fields["output_disagreement"] = [float(v) for v in z2]
+    exp.older_noise_scale = [float(args.changed_output_noise if c else args.old_data_noise)
+                             for c in changed]
+    exp.give_agent_data(exp.agent)
+    logger.info("the healthy model on the first damaged episode: mean squared standardised "
+                "error per state dimension %s; changed by the damage: %s", np.round(z2, 2),
+                np.flatnonzero(changed).tolist())
 
 
 def restart_after_damage(exp: Experiment, args: argparse.Namespace, first: int) -> None:
@@ -239,11 +309,13 @@ def run(exp: Experiment, args: argparse.Namespace) -> Dict[str, Any]:
         # also on resume: a run killed after an episode's files but before this field's
         # save counts its recovery from the episodes themselves
         fields["episodes_to_recover"] = _recovered_after(exp, first)
+        per_output_noise(exp, args, first)  # a run resumed after the first damaged episode
         while len(exp.episodes) - first + 1 < args.damaged_episodes:
             if fields["episodes_to_recover"] is not None and not args.no_stop_when_recovered:
                 break
             exp.run_learned_episode()
             fields["episodes_to_recover"] = _recovered_after(exp, first)
+            per_output_noise(exp, args, first)
             exp.save_progress()
         exp.complete = True
     return exp.summary()

@@ -1,0 +1,132 @@
+"""The adaptation's per-output weighting of the healthy data (``--changed-output-noise``):
+the state dimensions that the damage changed, found from how badly the healthy model
+explains the first damaged episode, forget the healthy transitions; the others keep them.
+Checked on a real agent of a 2-D point whose first actuator breaks, through the
+experiment's data path (the factors the agent gets, [D, N]) and a resume."""
+from __future__ import annotations
+
+import argparse
+
+import gymnasium
+import numpy as np
+import pytest
+
+from pilco.controllers import LinearController
+from pilco.experiment import Experiment, ExperimentConfig
+from pilco.models import PILCO
+from pilco.rewards import ExponentialReward
+from pilco.tasks import adaptation
+
+
+class PlaneEnv(gymnasium.Env):
+    """A point in the plane: ``x' = x + u``; once broken (class-wide, as the arm is for
+    every episode after the damage) the first coordinate no longer moves."""
+
+    broken = False
+
+    def __init__(self):
+        self.observation_space = gymnasium.spaces.Box(-10, 10, (2,), np.float64)
+        self.action_space = gymnasium.spaces.Box(-0.5, 0.5, (2,), np.float64)
+        self.x = np.zeros(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x = np.zeros(2)
+        return self.x.copy(), {"distance": 1.0}
+
+    def step(self, action):
+        u = np.clip(np.asarray(action, dtype=float), -0.5, 0.5)
+        if PlaneEnv.broken:
+            u[0] = 0.0
+        self.x = self.x + u
+        return self.x.copy(), 0.0, False, False, {"distance": 1.0}
+
+
+def build(data, start_states):
+    return PILCO(data, LinearController(2, 2), ExponentialReward(2, t=np.ones(2)), horizon=3,
+                 m_init=start_states[:1])
+
+
+def args(**kw):
+    base = dict(changed_output_noise=1e6, changed_output_threshold=10.0, old_data_noise=100.0)
+    base.update(kw)
+    return argparse.Namespace(**base)
+
+
+@pytest.fixture
+def damaged_run(tmp_path):
+    """Two healthy random episodes (the model fitted to them), then one on the broken
+    arm: the point of the adaptation where the factors are chosen."""
+    cfg = ExperimentConfig(task="plane", env_id="unused", seed=1, episodes=4,
+                           random_episodes=2, steps=25, random_action_scale=0.3,
+                           predictions=False, quiet=True, render=False)
+    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv)
+    PlaneEnv.broken = False
+    try:
+        exp.run_random_episode()
+        exp.run_random_episode()
+        exp.agent.optimize_models(maxiter=200)
+        exp.older_noise_scale, exp.older_before_episode = 100.0, 3  # as adaptation.run
+        PlaneEnv.broken = True
+        exp.run_random_episode()  # the first damaged episode (random here)
+    finally:
+        PlaneEnv.broken = False
+    return exp
+
+
+def test_the_dimension_the_damage_changed_forgets_the_healthy_data(damaged_run):
+    exp = damaged_run
+    healthy = 50  # transitions of the two healthy episodes
+    # before the choice: every output down-weights the healthy data alike
+    np.testing.assert_array_equal(exp.agent.mgpr.noise_scales,
+                                  np.r_[np.full(healthy, 100.0), np.ones(25)])
+    adaptation.per_output_noise(exp, args(), first=3)
+    z2 = exp.summary_fields["output_disagreement"]
+    # the healthy model predicts the first coordinate moving by u; it stood still
+    assert z2[0] > 1e3 and z2[1] < 10.0, z2
+    assert exp.older_noise_scale == [1e6, 100.0]
+    want = np.stack([np.r_[np.full(healthy, 1e6), np.ones(25)],
+                     np.r_[np.full(healthy, 100.0), np.ones(25)]])
+    np.testing.assert_array_equal(exp.agent.mgpr.noise_scales, want)  # [D, N]
+    # chosen once: a later call (every damaged episode calls it) changes nothing
+    exp.older_noise_scale = 7.0
+    adaptation.per_output_noise(exp, args(changed_output_noise=5.0), first=3)
+    assert exp.older_noise_scale == 7.0
+    # the stuck coordinate's model now predicts it standing still where the healthy
+    # data said it moves
+    exp.older_noise_scale = [1e6, 100.0]
+    exp.give_agent_data(exp.agent)
+    exp.agent.optimize_models(maxiter=200)
+    X = np.array([[0.0, 0.0, 0.3, 0.3]])
+    mean, _ = exp.agent.one_step_prediction(X)
+    assert abs(mean[0, 0]) < 0.03 and abs(mean[0, 1] - 0.3) < 0.03, mean
+
+
+def test_the_disagreement_is_about_one_where_the_model_knew_the_dynamics(damaged_run):
+    exp = damaged_run
+    healthy = [e.transitions() for e in exp.episodes[:2]]
+    z2 = adaptation.output_disagreement(exp.agent, healthy[0], healthy[1])
+    assert np.all(z2 < 10.0), z2
+    # without the option, or before the damaged episode, nothing is chosen
+    for a, first in ((args(changed_output_noise=None), 3), (args(), 4)):
+        adaptation.per_output_noise(exp, a, first=first)
+        assert "output_disagreement" not in exp.summary_fields
+        assert exp.older_noise_scale == 100.0
+
+
+def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
+    exp = damaged_run
+    adaptation.per_output_noise(exp, args(), first=3)
+    exp.save_progress()
+    agents = []
+
+    def rebuild(data, start_states):
+        agents.append(build(data, start_states))
+        return agents[-1]
+
+    resumed = Experiment.resume(exp.directory, exp.config, rebuild, make_env=PlaneEnv)
+    assert resumed.older_noise_scale == [1e6, 100.0]
+    np.testing.assert_array_equal(resumed.agent.mgpr.noise_scales,
+                                  exp.agent.mgpr.noise_scales)
+    assert resumed.summary_fields["output_disagreement"] == \
+        exp.summary_fields["output_disagreement"]
