@@ -4,11 +4,13 @@ Reopens a run directory written by a task (``python -m pilco.tasks``, the exampl
 seed sweep), diagnoses learned episode K (default the last) with
 :func:`pilco.experiment.diagnose.diagnose` (the checks and the verdict rules are in that
 module's docstring), prints the report, writes it to ``RUN_DIR/diagnosis.json`` and logs
-the verdict. Runs of the tasks ``reacher``, ``damaged_reacher``, ``cartpole`` and
-``pendulum`` are reopened through their task (its agent builder replays the learning of an
-earlier episode); other runs (``adaptation``, whose arm breaks during the run) through
-their saved agent, which is enough for the last episode, and their candidate policies run
-on the real system only where the run's environment can be made from its settings.
+the verdict. Runs of the tasks ``reacher``, ``damaged_reacher``, ``cartpole``,
+``pendulum`` and ``adaptation`` are reopened through their task (its agent builder
+replays the learning of an earlier episode; the adaptation's replay redoes the damage's
+changes to the agent, :func:`pilco.tasks.adaptation.replay_damage`); other runs through
+their saved agent, which is enough for the last episode. Candidate policies run on the
+real system only where the run's environment can be made from its settings (not for the
+adaptation, whose arm breaks during the run).
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ __all__ = ["open_run", "build_parser", "main"]
 logger = logging.getLogger(__name__)
 
 #: tasks whose runs can be reopened with their agent builder
-REOPENABLE = ("reacher", "damaged_reacher", "cartpole", "pendulum")
+REOPENABLE = ("reacher", "damaged_reacher", "cartpole", "pendulum", "adaptation")
 
 
 def open_run(directory: str):

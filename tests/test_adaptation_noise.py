@@ -1,8 +1,10 @@
-"""The adaptation's per-output weighting of the healthy data (``--changed-output-noise``):
-the state dimensions that the damage changed, found from how badly the healthy model
-explains the first damaged episode, forget the healthy transitions; the others keep them.
-Checked on a real agent of a 2-D point whose first actuator breaks, through the
-experiment's data path (the factors the agent gets, [D, N]) and a resume."""
+"""The adaptation after the damage, on a real agent of a 2-D point whose first actuator
+breaks: the per-output weighting of the healthy data (``--changed-output-noise``: the
+state dimensions that the damage changed, found from how badly the healthy model explains
+the first damaged episode, forget the healthy transitions; the others keep them), through
+the experiment's data path (the factors the agent gets, [D, N]) and a resume; and the
+replay of a damaged episode's learning (what ``python -m pilco.diagnose --episode N``
+does), which must redo the damage's changes to the agent."""
 from __future__ import annotations
 
 import argparse
@@ -24,6 +26,9 @@ class PlaneEnv(gymnasium.Env):
 
     broken = False
 
+    def damage(self, joints, mode):  # noqa: ARG002 - the reacher's signature
+        PlaneEnv.broken = True
+
     def __init__(self):
         self.observation_space = gymnasium.spaces.Box(-10, 10, (2,), np.float64)
         self.action_space = gymnasium.spaces.Box(-0.5, 0.5, (2,), np.float64)
@@ -31,20 +36,23 @@ class PlaneEnv(gymnasium.Env):
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        self.x = np.zeros(2)
-        return self.x.copy(), {"distance": 1.0}
+        self.x = np.array([0.3, -0.2]) if PlaneEnv.broken else np.zeros(2)
+        return self.x.copy(), {"distance": self.distance()}
+
+    def distance(self):
+        return float(np.linalg.norm(self.x - 1.0))
 
     def step(self, action):
         u = np.clip(np.asarray(action, dtype=float), -0.5, 0.5)
         if PlaneEnv.broken:
             u[0] = 0.0
         self.x = self.x + u
-        return self.x.copy(), 0.0, False, False, {"distance": 1.0}
+        return self.x.copy(), 0.0, False, False, {"distance": self.distance()}
 
 
 def build(data, start_states):
-    return PILCO(data, LinearController(2, 2), ExponentialReward(2, t=np.ones(2)), horizon=3,
-                 m_init=start_states[:1])
+    return PILCO(data, LinearController(2, 2, seed=0), ExponentialReward(2, t=np.ones(2)),
+                 horizon=3, m_init=start_states[:1])
 
 
 def args(**kw):
@@ -130,3 +138,42 @@ def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
                                   exp.agent.mgpr.noise_scales)
     assert resumed.summary_fields["output_disagreement"] == \
         exp.summary_fields["output_disagreement"]
+
+
+@pytest.mark.parametrize("episode, restarts", [(3, 1), (4, 2)])
+def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restarts):
+    """``adaptation.run`` on the plane: a random and a healthy episode, the damage (the
+    broken plane starts elsewhere: the agent's ``m_init`` changes), two damaged episodes
+    (with ``--damaged-policy-restarts 2`` the second one's policy search restarts).
+    Replaying the learning up to a damaged episode (the diagnosis of an earlier episode)
+    gives the policy that ran it only with the task's replay hook."""
+    from pilco.experiment.reconstruct import action_error, replay_learning
+
+    cfg = ExperimentConfig(task="plane", env_id="unused", seed=2, episodes=4,
+                           random_episodes=1, steps=8, random_action_scale=0.3,
+                           model_iters=20, policy_iters=5, predictions=False, quiet=True,
+                           render=False)
+    run_args = argparse.Namespace(
+        random_episodes=1, healthy_episodes=1, damaged_episodes=2, damaged_joints=["x"],
+        damage_mode="stuck", drop_old_data=False, no_stop_when_recovered=False,
+        min_healthy_episodes=1, damaged_cost="all", damage_input=False,
+        old_data_noise=100.0, damaged_policy_restarts=restarts, changed_output_noise=None,
+        changed_output_threshold=10.0)
+    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv)
+    exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None}
+    exp.before_replayed_episode = adaptation.replay_damage(exp, run_args)
+    PlaneEnv.broken = False
+    try:
+        summary = adaptation.run(exp, run_args)
+    finally:
+        PlaneEnv.broken = False
+    assert summary["damage_at_episode"] == 3 and len(exp.episodes) == 4
+    np.testing.assert_array_equal(exp.agent.m_init, [[0.3, -0.2]])
+    view = replay_learning(exp, episode)
+    np.testing.assert_array_equal(view.agent.m_init, [[0.3, -0.2]])
+    assert view.config.policy_restarts_at(episode, False) == (restarts if episode == 4 else 1)
+    assert action_error(view.agent, exp.episodes[episode - 1]) < 1e-9
+    exp.before_replayed_episode = None  # without the hook: the healthy start, another policy
+    view = replay_learning(exp, episode)
+    np.testing.assert_array_equal(view.agent.m_init, [[0.0, 0.0]])
+    assert action_error(view.agent, exp.episodes[episode - 1]) > 1e-6

@@ -62,6 +62,12 @@ class Experiment(RunRecord):
 
     The collected episodes, records, timings, task state, saving and the summary are
     those of :class:`~pilco.experiment.record.RunRecord`.
+
+    ``before_replayed_episode``: ``(view, episode number) -> None`` or None; when the
+    run's learning is replayed (:func:`~pilco.experiment.reconstruct.replay_learning`,
+    e.g. by ``python -m pilco.diagnose``), called before each learned episode's model fit
+    with the replay's view, so that a task can redo what it changed in its agent during
+    the run (the adaptation's damage).
     """
 
     def __init__(self, config: ExperimentConfig, directory: str,
@@ -79,6 +85,7 @@ class Experiment(RunRecord):
         self.render_fn = render_fn
         self.after_model_fit = after_model_fit
         self.before_policy_search = before_policy_search
+        self.before_replayed_episode: Optional[Callable[[Any, int], None]] = None
         self._make_env = make_env
         self.env = None
 

@@ -46,7 +46,8 @@ def replay_learning(exp, episode: int):
     """Repeat the run's learning up to episode ``episode``'s policy: build the agent on
     the random episodes with ``exp.build_agent``, then for every learned episode j <=
     ``episode`` fit the model on the data of episodes before j and optimise the policy, with
-    the run's settings and seeds. Returns the view of ``exp`` (:func:`view_before`) holding the
+    the run's settings and seeds; the task's ``exp.before_replayed_episode(view, j)`` (if
+    any) runs before each fit. Returns the view of ``exp`` (:func:`view_before`) holding the
     agent; on the same arithmetic the policy is the run's own (see :func:`action_error`)."""
     if exp.build_agent is None:
         raise ValueError("replaying a run's learning needs its agent builder (the task's)")
@@ -58,6 +59,9 @@ def replay_learning(exp, episode: int):
         view.episodes = list(exp.episodes[: j - 1])
         view.records = list(exp.records[: j - 1])
         view.give_agent_data(view.agent)
+        hook = getattr(exp, "before_replayed_episode", None)
+        if hook is not None:
+            hook(view, j)
         train_model(view, j)
         learn_policy(view, j)
         logger.info("replayed the model fit and policy optimisation of episode %d in %.1f s",

@@ -46,7 +46,7 @@ from ..experiment.cli import (
 from . import reacher
 
 __all__ = ["build_parser", "parse_args", "make_experiment", "damage", "learn_the_flag",
-           "output_disagreement", "per_output_noise",
+           "output_disagreement", "per_output_noise", "replay_damage",
            "run_healthy", "restart_after_damage", "run", "figures", "main", "RECOVER_WITHIN",
            "ADDED_LATER"]
 
@@ -157,7 +157,32 @@ def make_experiment(args: argparse.Namespace) -> Experiment:
                                   wrap_env=_damage_flag if args.damage_input else None)
     exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None,
                           **exp.summary_fields}
+    exp.before_replayed_episode = replay_damage(exp, args)
     return exp
+
+
+def replay_damage(exp: Experiment, args: argparse.Namespace):
+    """``(view, episode) -> None`` for :attr:`Experiment.before_replayed_episode`: when a
+    replay of the run's learning (``python -m pilco.diagnose --episode N``) reaches the
+    first damaged episode, the replayed agent gets what :func:`damage` gave the run's
+    agent: the damaged arm's start state (that episode's first state) as ``m_init``, the
+    main position cost alone with ``--damaged-cost main``, the flag's listener with
+    ``--damage-input``, the restarts of ``--damaged-policy-restarts``. The data's factors
+    after the damage come from the run's state."""
+
+    def before(view, episode: int) -> None:
+        first = exp.summary_fields.get("damage_at_episode")
+        if first is None or episode != first:
+            return
+        agent = view.agent
+        agent.m_init = exp.episodes[first - 1].states[0][None, :]
+        if args.damaged_cost == "main":
+            agent.reward = reacher.main_position_reward(agent.reward)
+        if args.damage_input:
+            learn_the_flag(agent, ignored=args.constant_input_lengthscale)
+        restart_after_damage(view, args, first)
+
+    return before
 
 
 def damage(exp: Experiment, args: argparse.Namespace) -> None:
