@@ -14,11 +14,14 @@ rollout during policy optimisation) computes it once.
 The E x E output covariance is symmetric: only its E(E+1)/2 upper-triangular pairs
 are evaluated, batched in one tensor, and the two quadratic terms of each pair's
 exponent are folded into one matrix product so that each pair costs one n x n
-``exp`` and one contraction.
+``exp`` and one contraction. With constant dynamics-GP weights (policy optimisation) the
+pairs are split into :func:`pair_groups`, independent parts of the graph that
+TensorFlow's inter-op threads run side by side (each pair's arithmetic is unchanged).
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Optional
+import os
+from typing import List, NamedTuple, Optional, Tuple
 
 import numpy as np
 import tensorflow as tf
@@ -32,8 +35,49 @@ __all__ = [
     "fitc_factorize",
     "symmetric_pairs",
     "pair_weights",
+    "pair_groups",
     "moment_match",
 ]
+
+#: at most this many groups of output pairs (:func:`pair_groups`)
+MAX_PAIR_GROUPS = 4
+
+
+def _parallel_threads() -> int:
+    """TensorFlow's inter-op threads: the number configured (``tf.config.threading`` or
+    ``TF_NUM_INTEROP_THREADS``), else the CPUs this process may use."""
+    configured = tf.config.threading.get_inter_op_parallelism_threads()
+    if configured:
+        return int(configured)
+    try:
+        configured = int(os.environ.get("TF_NUM_INTEROP_THREADS", "0"))
+    except ValueError:
+        configured = 0
+    if configured > 0:
+        return configured
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def pair_groups(P: int, E: int, groups: Optional[int] = None) -> List[Tuple[int, int]]:
+    """Consecutive ranges ``[(start, stop), ...]`` of the P output pairs of
+    :func:`symmetric_pairs` for E outputs, the first one holding the E diagonal pairs.
+
+    Each group's share of the pair block is an independent part of the compiled graph, so
+    TensorFlow runs the groups side by side on its inter-op threads: on 2 cores with one
+    intra-op thread, 2 groups took the reacher's objective + gradient from 0.42 to 0.31 s
+    (one group's operations, split by their batch, cannot use the second core as well).
+    ``groups`` defaults to the inter-op threads (at most :data:`MAX_PAIR_GROUPS`, at
+    least 1); with one thread a single group (the unsplit block) is used.
+    """
+    if groups is None:
+        groups = min(_parallel_threads(), MAX_PAIR_GROUPS)
+    groups = max(1, min(int(groups), P - E + 1))
+    bounds = [int(round(b)) for b in np.linspace(0, P, groups + 1)]
+    bounds[1] = max(bounds[1], E)
+    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
 
 
 class Factorization(NamedTuple):
@@ -414,10 +458,14 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
     m_first = m * pred.first_inv_sq_lengthscales  # m / l_i^2, [P, D]
     m_second = m * pred.second_inv_sq_lengthscales  # m / l_j^2, [P, D]
     if pred.weights_constant:
-        # centers and weights constant: the fused block with its cheaper gradient
-        raw = _pair_second_moments(T, m_first, m_second, log_k_first, log_k_second,
-                                   pred.first_centers, pred.second_centers, pred.first_beta,
-                                   pred.second_beta, pred.constant_inverse)
+        # centers and weights constant: the fused block with its cheaper gradient, in
+        # groups of pairs that can run side by side (the first one has the diagonal pairs)
+        parts = [m_first, m_second, log_k_first, log_k_second, pred.first_centers,
+                 pred.second_centers, pred.first_beta, pred.second_beta]
+        raw = tf.concat([
+            _pair_second_moments(T[a:b], *(x[a:b] for x in parts),
+                                 pred.constant_inverse if a == 0 else None)
+            for a, b in pair_groups(len(first), E)], axis=0)
     else:
         iiI = pred.first_centers - tf.expand_dims(m_first, 2)  # (centers - m) / l_i^2
         iiJ = pred.second_centers - tf.expand_dims(m_second, 2)

@@ -211,3 +211,42 @@ def test_fused_pair_block_agrees_with_automatic_differentiation():
         results.append([o.numpy() for o in out] + [gm, 0.5 * (gs + gs.T)])
     for fused, plain, name in zip(*results, ("M", "S", "V", "dL/dm", "dL/ds")):
         np.testing.assert_allclose(fused, plain, rtol=1e-10, atol=1e-12, err_msg=name)
+
+
+@pytest.mark.parametrize("E, groups, count", [(1, 4, 1), (2, 2, 2), (3, 4, 3), (4, 3, 3),
+                                               (10, 2, 2), (10, 4, 4)])
+def test_pair_groups_cover_every_pair_once_the_diagonal_first(E, groups, count):
+    P = E * (E + 1) // 2
+    ranges = moments.pair_groups(P, E, groups)
+    assert ranges[0][0] == 0 and ranges[-1][1] == P and ranges[0][1] >= E
+    assert all(a < b for a, b in ranges) and len(ranges) == count
+    assert all(b == c for (_, b), (c, _) in zip(ranges[:-1], ranges[1:]))
+    sizes = [b - a for a, b in ranges[1:]]
+    assert not sizes or max(sizes) - min(sizes) <= 1  # the off-diagonal pairs spread evenly
+
+
+@pytest.mark.parametrize("groups", [2, 3, 4])
+def test_grouped_pair_block_equals_one_group(monkeypatch, groups):
+    """The output pairs in groups that run side by side (the rollout's path, constant
+    factorisation): values and gradients those of the single block, 5 outputs."""
+    rng = np.random.default_rng(4)
+    X = rng.uniform(-1, 1, (30, 3))
+    Y = np.column_stack([np.sin(X @ rng.normal(size=3)) for _ in range(5)])
+    gp = MGPR((X, Y + 0.01 * rng.normal(size=Y.shape)))
+    for i, m in enumerate(gp.models):
+        m.kernel.lengthscales.assign([0.8 + 0.1 * i, 1.2, 0.9])
+        m.likelihood.variance.assign(1e-3 * (i + 1))
+    fact = gp.factorize()
+    w = [rng.standard_normal(shape) for shape in ((1, 5), (5, 5), (3, 5))]
+    results = []
+    for threads in (1, groups):
+        monkeypatch.setattr(moments, "_parallel_threads", lambda: threads)
+        assert len(moments.pair_groups(15, 5)) == threads
+        m, s = tf.Variable(M_IN), tf.Variable(S_IN)
+        with tf.GradientTape() as tape:
+            out = moments.moment_match(m, s, fact, constant=True)
+            L = sum(tf.reduce_sum(wi * o) for wi, o in zip(w, out))
+        gm, gs = (g.numpy() for g in tape.gradient(L, [m, s]))
+        results.append([o.numpy() for o in out] + [gm, gs])
+    for one, grouped, name in zip(*results, ("M", "S", "V", "dL/dm", "dL/ds")):
+        np.testing.assert_allclose(grouped, one, rtol=1e-12, atol=1e-14, err_msg=name)

@@ -2,9 +2,10 @@
 
 A run is ``python -m pilco.tasks TASK --seed S --output RUN_DIR --quiet --no-render
 --no-figures FLAGS...`` started by :func:`execute_run` inside a Ray task that reserves
-``cpus_per_run`` CPUs and limits TensorFlow's and the BLAS libraries' thread pools to as
-many threads, so ``C`` CPUs run ``C / cpus_per_run`` runs side by side without
-oversubscription. The Ray task returns the run's summary (and the tails of its output);
+``cpus_per_run`` CPUs and limits TensorFlow's inter-op and the BLAS libraries' thread
+pools to as many threads (TensorFlow's intra-op pool to one, see
+:func:`thread_environment`), so ``C`` CPUs run ``C / cpus_per_run`` runs side by side
+without oversubscription. The Ray task returns the run's summary (and the tails of its output);
 the driver (:func:`execute`) writes ``summary.json`` and ``sweep-run.json`` into the run
 directory itself, so results reach the driver's disk even when the worker's file system
 is not shared.
@@ -111,12 +112,16 @@ class SweepOutcome:
 
 def thread_environment(threads: int, base: Optional[Mapping[str, str]] = None
                        ) -> Dict[str, str]:
-    """``base`` (default ``os.environ``) with TensorFlow's intra-/inter-op pools and the
-    OpenMP/OpenBLAS/MKL pools set to ``threads`` threads."""
+    """``base`` (default ``os.environ``) with TensorFlow's inter-op pool and the
+    OpenMP/OpenBLAS/MKL pools set to ``threads`` threads and TensorFlow's intra-op pool
+    to one: the policy objective's independent groups of output pairs
+    (:func:`pilco.moments.pair_groups`) then run side by side, which uses the CPUs better
+    than splitting each operation (README, Performance)."""
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
     env = dict(os.environ if base is None else base)
     env.update({name: str(threads) for name in THREAD_VARIABLES})
+    env["TF_NUM_INTRAOP_THREADS"] = "1"
     env.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
     return env
 
