@@ -177,3 +177,15 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
     view = replay_learning(exp, episode)
     np.testing.assert_array_equal(view.agent.m_init, [[0.0, 0.0]])
     assert action_error(view.agent, exp.episodes[episode - 1]) > 1e-6
+
+
+def test_the_disagreement_takes_a_noise_variance_on_its_floor(damaged_run):
+    """A noise variance fitted down to its floor is copied exactly (unconstrained), where
+    assigning the constrained value would fail (its transform's inverse is -inf)."""
+    exp = damaged_run
+    noise = exp.agent.mgpr.models[1].likelihood.variance
+    noise.unconstrained_variable.assign(-60.0)
+    assert noise.numpy() == exp.agent.mgpr.noise_floor
+    healthy = [e.transitions() for e in exp.episodes[:2]]
+    z2 = adaptation.output_disagreement(exp.agent, healthy[0], healthy[1])
+    assert np.all(np.isfinite(z2)) and z2.shape == (2,)

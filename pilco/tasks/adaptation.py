@@ -229,15 +229,16 @@ def output_disagreement(agent, known, new) -> np.ndarray:
     hyperparameters conditioned on ``known`` (``var`` includes the noise). About 1 where
     that model knew the dynamics. Shapes: ``known``, ``new`` = (X [N, D + U], Y [N, D])."""
     from ..models import MGPR
+    from ..snapshots import restore, snapshot
 
     X, Y = known
     Xn, Yn = new
     trained = agent.mgpr
     model = MGPR((agent.gp_inputs(X), Y), noise_floor=trained.noise_floor)
     for mine, theirs in zip(model.models, trained.models):
-        mine.kernel.lengthscales.assign(theirs.kernel.lengthscales.numpy())
-        mine.kernel.variance.assign(theirs.kernel.variance.numpy())
-        mine.likelihood.variance.assign(theirs.likelihood.variance.numpy())
+        # unconstrained copies: exact also for a noise variance on its floor
+        restore(mine.kernel, snapshot(theirs.kernel))
+        restore(mine.likelihood, snapshot(theirs.likelihood))
     mean, var = (np.asarray(t) for t in model.predict_f(agent.gp_inputs(Xn)))
     var = var + np.asarray(model.noise_variance)
     return np.mean((Yn - mean) ** 2 / var, axis=0)
