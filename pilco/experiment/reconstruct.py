@@ -59,9 +59,8 @@ def replay_learning(exp, episode: int):
         view.episodes = list(exp.episodes[: j - 1])
         view.records = list(exp.records[: j - 1])
         view.give_agent_data(view.agent)
-        hook = getattr(exp, "before_replayed_episode", None)
-        if hook is not None:
-            hook(view, j)
+        if exp.before_replayed_episode is not None:
+            exp.before_replayed_episode(view, j)
         train_model(view, j)
         learn_policy(view, j)
         logger.info("replayed the model fit and policy optimisation of episode %d in %.1f s",
