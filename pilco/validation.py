@@ -267,7 +267,8 @@ def check_indices(indices, dim: int, name: str, distinct: bool = True) -> Tuple[
 
 
 def check_max_action(max_action, control_dim: int) -> np.ndarray:
-    """Action bounds as a float64 vector [control_dim] of positive finite values."""
+    """Action bounds as a float64 vector [control_dim] of non-negative finite values (a
+    bound of 0: the policy never moves that action, e.g. a joint known to be stuck)."""
     arr = _to_numpy(max_action, "max_action").reshape(-1)
     if arr.size == 1:
         arr = np.repeat(arr, control_dim)
@@ -276,8 +277,8 @@ def check_max_action(max_action, control_dim: int) -> np.ndarray:
             f"max_action must be a scalar or have {control_dim} entries, got {arr.size}"
         )
     _check_finite(arr, "max_action")
-    if np.any(arr <= 0):
-        raise ValueError(f"max_action must be positive, got {arr}")
+    if np.any(arr < 0):
+        raise ValueError(f"max_action must be non-negative, got {arr}")
     return arr
 
 

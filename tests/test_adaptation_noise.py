@@ -2,7 +2,9 @@
 breaks: the per-output weighting of the healthy data (``--changed-output-noise``: the
 state dimensions that the damage changed, found from how badly the healthy model explains
 the first damaged episode, forget the healthy transitions; the others keep them), through
-the experiment's data path (the factors the agent gets, [D, N]) and a resume; and the
+the experiment's data path (the factors the agent gets, [D, N]) and a resume; the
+stuck joint (``--stop-stuck-joints``: an actuator that stopped following its commands is
+no longer commanded, and the model sees its commands after the damage as 0); and the
 replay of a damaged episode's learning (what ``python -m pilco.diagnose --episode N``
 does), which must redo the damage's changes to the agent."""
 from __future__ import annotations
@@ -25,6 +27,7 @@ class PlaneEnv(gymnasium.Env):
     every episode after the damage) the first coordinate no longer moves."""
 
     broken = False
+    joint_dims = (0, 1)  # each action moves its own coordinate
 
     def damage(self, joints, mode):  # noqa: ARG002 - the reacher's signature
         PlaneEnv.broken = True
@@ -140,11 +143,13 @@ def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
         exp.summary_fields["output_disagreement"]
 
 
-@pytest.mark.parametrize("episode, restarts", [(3, 1), (4, 2)])
-def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restarts):
+@pytest.mark.parametrize("episode, restarts, stop", [(3, 1, False), (4, 2, False),
+                                                     (4, 1, True)])
+def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restarts, stop):
     """``adaptation.run`` on the plane: a random and a healthy episode, the damage (the
     broken plane starts elsewhere: the agent's ``m_init`` changes), two damaged episodes
-    (with ``--damaged-policy-restarts 2`` the second one's policy search restarts).
+    (with ``--damaged-policy-restarts 2`` the second one's policy search restarts; with
+    ``--stop-stuck-joints`` the second one no longer commands the stuck coordinate).
     Replaying the learning up to a damaged episode (the diagnosis of an earlier episode)
     gives the policy that ran it only with the task's replay hook."""
     from pilco.experiment.reconstruct import action_error, replay_learning
@@ -158,7 +163,7 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
         damage_mode="stuck", drop_old_data=False, no_stop_when_recovered=False,
         min_healthy_episodes=1, damaged_cost="all", damage_input=False,
         old_data_noise=100.0, damaged_policy_restarts=restarts, changed_output_noise=None,
-        changed_output_threshold=10.0)
+        changed_output_threshold=10.0, stop_stuck_joints=stop, stuck_joint_ratio=0.1)
     exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv)
     exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None}
     exp.before_replayed_episode = adaptation.replay_damage(exp, run_args)
@@ -169,6 +174,12 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
         PlaneEnv.broken = False
     assert summary["damage_at_episode"] == 3 and len(exp.episodes) == 4
     np.testing.assert_array_equal(exp.agent.m_init, [[0.3, -0.2]])
+    if stop:
+        assert summary["stuck_joints"] == [0] and exp.inert_actions == [0]
+        assert np.all(exp.episodes[2].actions[:, 0] != 0.0)  # sent, with no effect
+        np.testing.assert_array_equal(exp.episodes[3].actions[:, 0], 0.0)  # not sent
+    else:
+        assert "stuck_joints" not in summary
     view = replay_learning(exp, episode)
     np.testing.assert_array_equal(view.agent.m_init, [[0.3, -0.2]])
     assert view.config.policy_restarts_at(episode, False) == (restarts if episode == 4 else 1)
@@ -189,3 +200,73 @@ def test_the_disagreement_takes_a_noise_variance_on_its_floor(damaged_run):
     healthy = [e.transitions() for e in exp.episodes[:2]]
     z2 = adaptation.output_disagreement(exp.agent, healthy[0], healthy[1])
     assert np.all(np.isfinite(z2)) and z2.shape == (2,)
+
+
+def stuck_args(**kw):
+    base = dict(stop_stuck_joints=True, stuck_joint_ratio=0.1)
+    base.update(kw)
+    return argparse.Namespace(**base)
+
+
+def test_a_stuck_joint_is_no_longer_commanded(damaged_run):
+    exp = damaged_run
+    healthy = 50  # transitions of the two healthy episodes
+    ratios = adaptation.joint_follow_ratios(exp.episodes[:2], PlaneEnv.joint_dims)
+    np.testing.assert_allclose(ratios, 1.0, rtol=1e-9)  # x' = x + u, no limits
+    sent = exp.episodes[2].actions[:, 0].copy()
+    assert np.all(sent != 0.0)
+    for a in (stuck_args(stop_stuck_joints=False), stuck_args()):
+        adaptation.stop_stuck_joints(exp, a, first=4)  # before the first damaged episode
+        assert "stuck_joints" not in exp.summary_fields and exp.inert_actions == []
+    adaptation.stop_stuck_joints(exp, stuck_args(), first=3)
+    fields = exp.summary_fields
+    assert fields["stuck_joints"] == [0] and exp.inert_actions == [0]
+    assert fields["joint_follow_ratio"][0] == 0.0
+    assert fields["joint_follow_ratio"][1] == pytest.approx(1.0)
+    agent = exp.agent
+    np.testing.assert_array_equal(agent.controller.max_action, [0.0, 1.0])
+    assert agent.compute_action(np.array([[0.2, 0.7]]))[0, 0] == 0.0
+    # the model: the healthy data as sent and as equals, the damaged commands as 0
+    X, _ = agent.data
+    np.testing.assert_array_equal(X[:healthy], exp.episodes[0].transitions()[0].tolist()
+                                  + exp.episodes[1].transitions()[0].tolist())
+    np.testing.assert_array_equal(X[healthy:, 2], 0.0)
+    np.testing.assert_array_equal(X[healthy:, 3], exp.episodes[2].actions[:, 1])
+    np.testing.assert_array_equal(agent.mgpr.noise_scales, np.ones(healthy + 25))
+    np.testing.assert_array_equal(exp.episodes[2].actions[:, 0], sent)  # the record keeps them
+    # with the stuck coordinate's commands at 0 every transition tells the same story: the
+    # refitted model has the first coordinate stay where it starts under any policy
+    agent.optimize_models(maxiter=200)
+    m, _, _ = agent.predict(np.array([[0.3, -0.2]]), 0.01 * np.eye(2), 3)
+    assert abs(m[0, 0] - 0.3) < 0.03, m
+    # found once: later calls (after every damaged episode) keep the choice
+    exp.inert_actions = [0]
+    adaptation.stop_stuck_joints(exp, stuck_args(stuck_joint_ratio=2.0), first=3)
+    assert fields["stuck_joints"] == [0]
+
+
+def test_a_healthy_joint_stays_commanded_and_the_flags_exclude_each_other(damaged_run):
+    exp = damaged_run
+    ratios = adaptation.joint_follow_ratios(exp.episodes[2:], PlaneEnv.joint_dims)
+    # a joint that never followed its commands on the healthy arm is not called stuck
+    assert adaptation.stuck_joints(exp.episodes[2:], exp.episodes[2:], 0.1,
+                                   PlaneEnv.joint_dims) == []
+    assert adaptation.stuck_joints(exp.episodes[:2], exp.episodes[2:], 0.1,
+                                   PlaneEnv.joint_dims) == [0]
+    assert ratios[0] == 0.0 and np.isnan(adaptation.joint_follow_ratios(
+        [exp.episodes[2]], (1, 0))).sum() == 0
+    with pytest.raises(SystemExit):
+        adaptation.parse_args(["--stop-stuck-joints", "--changed-output-noise", "1e6",
+                               "--output", str(exp.directory) + "-x"])
+
+
+def test_a_resumed_run_keeps_the_stuck_joint_stopped(damaged_run):
+    exp = damaged_run
+    adaptation.stop_stuck_joints(exp, stuck_args(), first=3)
+    exp.save()
+    resumed = Experiment.resume(exp.directory, exp.config, build, make_env=PlaneEnv)
+    assert resumed.inert_actions == [0] and resumed.inert_from_episode == 3
+    np.testing.assert_array_equal(resumed.training_data()[0], exp.training_data()[0])
+    adaptation.stop_stuck_joints(resumed, stuck_args(), first=3)  # as adaptation.run does
+    np.testing.assert_array_equal(resumed.agent.controller.max_action, [0.0, 1.0])
+    np.testing.assert_array_equal(resumed.agent.data[0], exp.agent.data[0])

@@ -96,7 +96,7 @@ CONSTRUCTION = [
     ("rbf-bool-basis", lambda: RbfController(2, 1, True), TypeError,
      "num_basis_functions must be a positive integer"),
     ("rbf-negative-max-action", lambda: RbfController(2, 1, 4, max_action=-1.0), ValueError,
-     "max_action must be positive"),
+     "max_action must be non-negative"),
     ("rbf-nan-max-action", lambda: RbfController(2, 1, 4, max_action=np.nan), ValueError,
      "max_action contains NaN"),
     ("rbf-max-action-size", lambda: RbfController(2, 2, 4, max_action=[1.0, 2.0, 3.0]),

@@ -155,6 +155,11 @@ class FetchJointReacher(gymnasium.Env):
         return ARM_JOINTS
 
     @property
+    def joint_dims(self) -> tuple[int, ...]:
+        """Observation index of each joint's angle, action order: ``(3, ..., 9)``."""
+        return tuple(range(3, 3 + len(ARM_JOINTS)))
+
+    @property
     def joint_limits(self) -> np.ndarray:
         """Joint limits ``[[low, high], ...]`` [rad], shape ``(7, 2)``; ±inf if unlimited."""
         return np.stack([self._lower, self._upper], axis=1)

@@ -29,7 +29,10 @@ class RunRecord:
     ``older_noise_scale`` and ``older_before_episode`` (the transitions of episodes before
     ``older_before_episode`` have their noise variance multiplied by ``older_noise_scale``
     in the model: a large factor down-weights them, e.g. the healthy arm's after a damage;
-    a list gives each state dimension's GP its own factor)
+    a list gives each state dimension's GP its own factor),
+    ``inert_actions`` and ``inert_from_episode`` (action dimensions that had no effect on
+    the system from that episode on, e.g. a stuck joint's command: the model sees them as
+    0 there, their effective value; the episodes keep what was sent)
     and ``summary_fields`` (extra fields of the summary, e.g. when a damage happened).
     """
 
@@ -52,6 +55,9 @@ class RunRecord:
         #: float, or one float per state dimension (its output GP's factor)
         self.older_noise_scale: Union[float, List[float]] = 1.0
         self.older_before_episode = 1
+        #: action dimensions (0-based) the model sees as 0 from ``inert_from_episode`` on
+        self.inert_actions: List[int] = []
+        self.inert_from_episode = 1
         self.summary_fields: Dict[str, Any] = {}
         self.interrupted = False
         self.complete = False
@@ -81,8 +87,16 @@ class RunRecord:
 
     def training_data(self) -> Data:
         """The model's transitions: episodes from ``train_from_episode`` on (at least the
-        last one), the first ``max_data`` of them."""
-        X, Y = stack_transitions([e for _, e in self._training_episodes()])
+        last one), the first ``max_data`` of them; the ``inert_actions`` of episodes from
+        ``inert_from_episode`` on are 0 (what reached the system)."""
+        episodes = self._training_episodes()
+        X, Y = stack_transitions([e for _, e in episodes])
+        if self.inert_actions and len(X):
+            inert = np.concatenate([np.full(e.steps, number >= self.inert_from_episode)
+                                    for number, e in episodes])
+            columns = Y.shape[1] + np.asarray(self.inert_actions, dtype=int)
+            X = X.copy()
+            X[np.ix_(inert, columns)] = 0.0
         if self.config.max_data is not None:
             X, Y = X[: self.config.max_data], Y[: self.config.max_data]
         return X, Y

@@ -164,6 +164,8 @@ def progress_record(exp) -> Dict[str, Any]:
         "train_from_episode": exp.train_from_episode,
         "older_noise_scale": exp.older_noise_scale,
         "older_before_episode": exp.older_before_episode,
+        "inert_actions": list(exp.inert_actions),
+        "inert_from_episode": exp.inert_from_episode,
         "summary_fields": exp.summary_fields,
         "interrupted": exp.interrupted,
         "complete": exp.complete,
@@ -188,4 +190,6 @@ def restore_progress(exp, progress: Dict[str, Any]) -> None:
     exp.older_noise_scale = ([float(f) for f in older] if isinstance(older, list)
                              else float(older))
     exp.older_before_episode = int(progress.get("older_before_episode", 1))
+    exp.inert_actions = [int(a) for a in progress.get("inert_actions", [])]
+    exp.inert_from_episode = int(progress.get("inert_from_episode", 1))
     exp.summary_fields = dict(progress.get("summary_fields", legacy.get("summary", {})))

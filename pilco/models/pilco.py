@@ -113,6 +113,14 @@ class PILCO(gpflow.base.Module):
                                                     self.state_dim)
         self._policy_optimizer = GuardedScipy()  # its compiled objective saw the old one
 
+    def retrace(self) -> None:
+        """Drop the compiled policy objective, trajectory and action functions, so that the
+        next call traces them again. Needed after changing a plain attribute that a trace
+        holds as a constant, e.g. ``controller.max_action``: assigning the same controller
+        (or reward) object again does nothing, as for any TensorFlow module attribute."""
+        self._rollout.retrace()
+        self._policy_optimizer = GuardedScipy()  # its compiled objective is a trace too
+
     @property
     def reward(self):
         """The reward (:class:`pilco.protocols.Reward`)."""

@@ -66,9 +66,9 @@ class Rollout(gpflow.base.Module):
         self._lengthscales = tf.Variable(tf.ones([D, inputs], f), trainable=False)
         self._signal_variance = tf.Variable(tf.ones([D], f), trainable=False)
         self._noise_variance = tf.Variable(tf.ones([D], f), trainable=False)
-        self._compile()
+        self.retrace()
 
-    def _compile(self) -> None:
+    def retrace(self) -> None:
         """(Re)create the compiled functions. A trace captures the controller and the
         reward it was traced with, so replacing either must drop the old traces."""
         self.total_reward = tf.function(self._total_reward, autograph=False)
@@ -83,7 +83,7 @@ class Rollout(gpflow.base.Module):
     @controller.setter
     def controller(self, value: Controller) -> None:
         self._controller = value
-        self._compile()
+        self.retrace()
 
     @property
     def reward(self) -> Reward:
@@ -93,7 +93,7 @@ class Rollout(gpflow.base.Module):
     @reward.setter
     def reward(self, value: Reward) -> None:
         self._reward = value
-        self._compile()
+        self.retrace()
 
     def refresh(self, dynamics_model) -> None:
         """Factorise ``dynamics_model`` (an :class:`MGPR`) for the compiled functions."""

@@ -16,6 +16,11 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
    episode on, the state dimensions whose first damaged episode the healthy model
    explained badly (:func:`output_disagreement` above ``--changed-output-threshold``) see
    them with G times the noise variance instead, the others with F;
+   ``--stop-stuck-joints``: from the second damaged episode on, the joints that did not
+   follow their commands in the first one (:func:`stuck_joints`) are no longer commanded
+   (their action bound becomes 0), the model sees their commands in the damaged episodes
+   as 0, what reached the arm, and the healthy arm's transitions, which then describe the
+   damaged arm too, count as equals again;
    ``--damaged-cost main``: the policy then optimises the main position cost only;
    ``--damaged-policy-restarts N``: from the second damaged episode on, the policy
    search also runs from N - 1 random policies and keeps the best predicted return),
@@ -46,7 +51,8 @@ from ..experiment.cli import (
 from . import reacher
 
 __all__ = ["build_parser", "parse_args", "make_experiment", "damage", "learn_the_flag",
-           "output_disagreement", "per_output_noise", "replay_damage",
+           "output_disagreement", "per_output_noise", "replay_damage", "joint_follow_ratios",
+           "stuck_joints", "stop_stuck_joints",
            "run_healthy", "restart_after_damage", "run", "figures", "main", "RECOVER_WITHIN",
            "ADDED_LATER"]
 
@@ -55,9 +61,14 @@ logger = logging.getLogger(__name__)
 #: success: the damaged arm reaches again within this many damaged episodes
 RECOVER_WITHIN = 3
 
+#: a joint whose rotations summed to less than this share of its commanded ones on the
+#: healthy arm did not follow its commands there either (e.g. held at a limit)
+HEALTHY_FOLLOW_RATIO = 0.5
+
 #: settings added after runs were saved, with the value that reproduces such a run
 ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all", min_healthy_episodes=1,
                    damage_input=False, old_data_noise=1.0, damaged_policy_restarts=1,
+                   stop_stuck_joints=False, stuck_joint_ratio=0.1,
                    changed_output_noise=None, changed_output_threshold=10.0)
 
 
@@ -114,6 +125,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="mean squared standardised one-step error of the healthy model on "
                         "the first damaged episode above which a state dimension counts as "
                         "changed by the damage")
+    g.add_argument("--stop-stuck-joints", action="store_true",
+                   help="from the second damaged episode on, stop commanding the joints "
+                        "that moved less than --stuck-joint-ratio of their commanded "
+                        "rotation in the first one (and followed their commands on the "
+                        "healthy arm); the model sees their commands after the damage as "
+                        "0 and the healthy arm's transitions as equals again")
+    g.add_argument("--stuck-joint-ratio", type=positive_float, default=0.1, metavar="R",
+                   help="a joint counts as stuck when the sum of its measured rotations over "
+                        "the first damaged episode is below R times the sum of its "
+                        "commanded ones")
     g.add_argument("--damaged-policy-restarts", type=positive_int, default=1, metavar="N",
                    help="from the second damaged episode on (the first one's model knows "
                         "only the healthy arm), run each policy search from the previous "
@@ -129,7 +150,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    args = parse_task_args(build_parser(), argv, ADDED_LATER)
+    parser = build_parser()
+    args = parse_task_args(parser, argv, ADDED_LATER)
+    if args.stop_stuck_joints and args.changed_output_noise is not None:
+        parser.error("--stop-stuck-joints and --changed-output-noise both set the healthy "
+                     "data's noise factors after the first damaged episode: choose one")
+    if args.stop_stuck_joints and args.joint_state != "measured":
+        parser.error("--stop-stuck-joints reads the measured joint angles: it needs "
+                     "--joint-state measured")
     args.episodes = args.random_episodes + args.healthy_episodes + args.damaged_episodes
     return args
 
@@ -168,10 +196,13 @@ def replay_damage(exp: Experiment, args: argparse.Namespace):
     agent: the damaged arm's start state (that episode's first state) as ``m_init``, the
     main position cost alone with ``--damaged-cost main``, the flag's listener with
     ``--damage-input``, the restarts of ``--damaged-policy-restarts``. The data's factors
-    after the damage come from the run's state."""
+    after the damage come from the run's state, and so do the joints that
+    ``--stop-stuck-joints`` stopped commanding from the next episode on."""
 
     def before(view, episode: int) -> None:
         first = exp.summary_fields.get("damage_at_episode")
+        if first is not None and episode > first and exp.inert_actions:
+            _stop_commanding(view.agent, exp.inert_actions)  # --stop-stuck-joints
         if first is None or episode != first:
             return
         agent = view.agent
@@ -272,6 +303,73 @@ def per_output_noise(exp: Experiment, args: argparse.Namespace, first: int) -> N
                 np.flatnonzero(changed).tolist())
 
 
+def joint_follow_ratios(episodes, joint_dims: Sequence[int]) -> np.ndarray:
+    """How far each joint followed its commands over ``episodes``: the sum of its measured
+    rotations ``|Δq_j|`` over the sum of its commanded ones ``|u_j|``, [U] (about 1 for a
+    healthy joint away from its limits, 0 for a stuck one; NaN for a joint never
+    commanded). ``joint_dims`` [U]: the state dimension of each action's joint angle (the
+    env's ``joint_dims``)."""
+    moved = commanded = 0.0
+    for episode in episodes:
+        q = episode.states[:, list(joint_dims)]
+        moved = moved + np.sum(np.abs(np.diff(q, axis=0)), axis=0)
+        commanded = commanded + np.sum(np.abs(episode.actions), axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(commanded > 0, moved / np.where(commanded > 0, commanded, 1.0),
+                        np.nan)
+
+
+def stuck_joints(healthy, damaged, ratio: float, joint_dims: Sequence[int]) -> List[int]:
+    """Action indices of the joints that followed their commands on the ``healthy``
+    episodes (ratio at least :data:`HEALTHY_FOLLOW_RATIO`) and moved less than ``ratio``
+    of their commanded rotation in the ``damaged`` ones (:func:`joint_follow_ratios`)."""
+    before = joint_follow_ratios(healthy, joint_dims)
+    after = joint_follow_ratios(damaged, joint_dims)
+    return [int(j) for j in np.flatnonzero((before >= HEALTHY_FOLLOW_RATIO) & (after < ratio))]
+
+
+def _stop_commanding(agent, joints: Sequence[int]) -> None:
+    """Action bound 0 for ``joints`` (the policy's output and its model both see 0 there);
+    the agent's compiled functions are retraced for the new bounds."""
+    controller = agent.controller
+    bounds = np.array(controller.max_action, dtype=float)
+    if np.all(bounds[list(joints)] == 0.0):
+        return
+    bounds[list(joints)] = 0.0
+    controller.max_action = bounds
+    agent.retrace()  # the compiled functions hold the old bounds as constants
+
+
+def stop_stuck_joints(exp: Experiment, args: argparse.Namespace, first: int) -> None:
+    """With ``--stop-stuck-joints``, once the first damaged episode (``first``) ran and
+    before the model learns from it: the joints :func:`stuck_joints` finds are no longer
+    commanded (action bound 0), the model sees their commands in the damaged episodes as 0
+    (``exp.inert_actions`` from episode ``first``), and the healthy arm's transitions count
+    as equals again (noise factor 1): with the stuck joints' commands at 0 they describe the
+    damaged arm. The env's ``joint_dims`` say which state dimension holds each action's
+    joint. The summary holds ``joint_follow_ratio`` (first damaged episode, per action) and
+    ``stuck_joints`` (action indices; the Fetch arm's elbow is 3). Applied again on resume
+    (the saved agent keeps its bounds)."""
+    fields = exp.summary_fields
+    if not args.stop_stuck_joints or len(exp.episodes) < first:
+        return
+    if fields.get("stuck_joints") is None:
+        joint_dims = exp.make_env().unwrapped.joint_dims
+        joints = stuck_joints(exp.episodes[:first - 1], exp.episodes[first - 1:first],
+                              args.stuck_joint_ratio, joint_dims)
+        ratios = joint_follow_ratios(exp.episodes[first - 1:first], joint_dims)
+        fields["joint_follow_ratio"] = [float(r) for r in ratios]
+        fields["stuck_joints"] = joints
+        logger.info("joints' measured over commanded rotation in the first damaged episode "
+                    "%s; stuck (action indices): %s", np.round(ratios, 3), joints or "none")
+        if joints:
+            exp.inert_actions, exp.inert_from_episode = joints, first
+            exp.older_noise_scale = 1.0
+            exp.give_agent_data(exp.agent)
+    if exp.inert_actions:
+        _stop_commanding(exp.agent, exp.inert_actions)
+
+
 def restart_after_damage(exp: Experiment, args: argparse.Namespace, first: int) -> None:
     """With ``--damaged-policy-restarts N`` > 1: the policy searches of episodes
     ``first + 1`` on (``first``: the first damaged episode, whose model has seen only the
@@ -336,12 +434,14 @@ def run(exp: Experiment, args: argparse.Namespace) -> Dict[str, Any]:
         # save counts its recovery from the episodes themselves
         fields["episodes_to_recover"] = _recovered_after(exp, first)
         per_output_noise(exp, args, first)  # a run resumed after the first damaged episode
+        stop_stuck_joints(exp, args, first)
         while len(exp.episodes) - first + 1 < args.damaged_episodes:
             if fields["episodes_to_recover"] is not None and not args.no_stop_when_recovered:
                 break
             exp.run_learned_episode()
             fields["episodes_to_recover"] = _recovered_after(exp, first)
             per_output_noise(exp, args, first)
+            stop_stuck_joints(exp, args, first)
             exp.save_progress()
         exp.complete = True
     return exp.summary()
