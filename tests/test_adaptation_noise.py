@@ -248,11 +248,13 @@ def test_a_stuck_joint_is_no_longer_commanded(damaged_run):
 def test_a_healthy_joint_stays_commanded_and_the_flags_exclude_each_other(damaged_run):
     exp = damaged_run
     ratios = adaptation.joint_follow_ratios(exp.episodes[2:], PlaneEnv.joint_dims)
-    # a joint that never followed its commands on the healthy arm is not called stuck
+    # a joint that never followed its commands on the healthy arm is not called stuck;
+    # one that did in any healthy episode is (a joint may sit at a limit for a whole one)
     assert adaptation.stuck_joints(exp.episodes[2:], exp.episodes[2:], 0.1,
                                    PlaneEnv.joint_dims) == []
-    assert adaptation.stuck_joints(exp.episodes[:2], exp.episodes[2:], 0.1,
-                                   PlaneEnv.joint_dims) == [0]
+    for healthy in (exp.episodes[:2], exp.episodes[1:]):
+        assert adaptation.stuck_joints(healthy, exp.episodes[2:], 0.1,
+                                       PlaneEnv.joint_dims) == [0]
     assert ratios[0] == 0.0 and np.isnan(adaptation.joint_follow_ratios(
         [exp.episodes[2]], (1, 0))).sum() == 0
     with pytest.raises(SystemExit):

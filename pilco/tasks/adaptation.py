@@ -61,8 +61,8 @@ logger = logging.getLogger(__name__)
 #: success: the damaged arm reaches again within this many damaged episodes
 RECOVER_WITHIN = 3
 
-#: a joint whose rotations summed to less than this share of its commanded ones on the
-#: healthy arm did not follow its commands there either (e.g. held at a limit)
+#: a joint whose rotations summed to less than this share of its commanded ones in every
+#: healthy episode never followed its commands there either (e.g. held at a limit)
 HEALTHY_FOLLOW_RATIO = 0.5
 
 #: settings added after runs were saved, with the value that reproduces such a run
@@ -320,10 +320,12 @@ def joint_follow_ratios(episodes, joint_dims: Sequence[int]) -> np.ndarray:
 
 
 def stuck_joints(healthy, damaged, ratio: float, joint_dims: Sequence[int]) -> List[int]:
-    """Action indices of the joints that followed their commands on the ``healthy``
-    episodes (ratio at least :data:`HEALTHY_FOLLOW_RATIO`) and moved less than ``ratio``
-    of their commanded rotation in the ``damaged`` ones (:func:`joint_follow_ratios`)."""
-    before = joint_follow_ratios(healthy, joint_dims)
+    """Action indices of the joints that followed their commands in at least one of the
+    ``healthy`` episodes (ratio at least :data:`HEALTHY_FOLLOW_RATIO`: a joint may spend
+    whole healthy episodes at a limit) and moved less than ``ratio`` of their commanded
+    rotation over the ``damaged`` ones (:func:`joint_follow_ratios`)."""
+    before = np.nanmax([joint_follow_ratios([e], joint_dims) for e in healthy]
+                       + [np.full(len(joint_dims), -np.inf)], axis=0)
     after = joint_follow_ratios(damaged, joint_dims)
     return [int(j) for j in np.flatnonzero((before >= HEALTHY_FOLLOW_RATIO) & (after < ratio))]
 
