@@ -136,7 +136,8 @@ class AdaptationTask(LineTask):
                               no_stop_when_recovered=False, min_healthy_episodes=1,
                               damaged_cost="all", damage_input=False, old_data_noise=4.0,
                               damaged_policy_restarts=1, changed_output_noise=None,
-                              changed_output_threshold=10.0)
+                              changed_output_threshold=10.0, stop_stuck_joints=False,
+                              stuck_joint_ratio=0.1)
 
     def _fields(self, exp):  # as adaptation.make_experiment
         exp.success_fn = adaptation.recovered_within(adaptation.RECOVER_WITHIN)

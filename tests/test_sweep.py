@@ -191,6 +191,13 @@ def test_assignments_and_flags():
         cli.setting_flags("retrain_unchanged_model", "3", parser)
     with pytest.raises(ValueError, match="no flag --bogus"):
         cli.setting_flags("bogus", "1", parser)
+    # a flag that is on by default (--key/--no-key): false turns it off
+    adaptation = cli.task_parser("adaptation")
+    assert cli.setting_flags("stop_stuck_joints", "false", adaptation) == \
+        ["--no-stop-stuck-joints"]
+    assert cli.setting_flags("stop_stuck_joints", "true", adaptation) == \
+        ["--stop-stuck-joints"]
+    cli.check_task_flags(adaptation, ["--no-stop-stuck-joints"])
     # without the task's parser: true/false are flags without value
     assert cli.setting_flags("no_early_stop", "true", None) == ["--no-early-stop"]
     assert cli.setting_flags("horizon", "30", None) == ["--horizon", "30"]

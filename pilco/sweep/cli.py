@@ -122,7 +122,8 @@ def _option(key: str) -> str:
 def setting_flags(key: str, value: str, parser: Optional[argparse.ArgumentParser]
                   ) -> List[str]:
     """The task flags of ``key=value``: ``["--key", value]``, or for a flag without value
-    (``store_true``) ``["--key"]`` when ``value`` is true and ``[]`` when false.
+    (``store_true``) ``["--key"]`` when ``value`` is true and ``[]`` when false (for an
+    ``--key/--no-key`` flag ``["--no-key"]``).
 
     With a ``parser`` the flag must be one of its options. Without one, ``true`` and
     ``false`` are taken as such a flag.
@@ -136,6 +137,8 @@ def setting_flags(key: str, value: str, parser: Optional[argparse.ArgumentParser
                              f"python -m pilco.tasks TASK --help")
         if action.nargs != 0:
             return [option, value]
+        if isinstance(action, argparse.BooleanOptionalAction) and value.lower() in _FALSE:
+            return ["--no-" + option[2:]]  # a flag that is on by default
     if value.lower() in _TRUE:
         return [option]
     if value.lower() in _FALSE:
