@@ -207,8 +207,11 @@ def test_adaptation(runs):
     pytest.importorskip("mujoco")
     d, out = _ok(runs["adaptation"])
     s = _load_summary(d)
-    _check_summary(s, "adaptation", 4, extra=("damage_at_episode", "episodes_to_recover"))
+    _check_summary(s, "adaptation", 4, extra=("damage_at_episode", "episodes_to_recover",
+                                              "stuck_joints", "joint_follow_ratio"))
     assert s["damage_at_episode"] == 4  # both healthy episodes ran, reached or not
+    # the first damaged episode found the stuck elbow (action 3): it never moved
+    assert s["stuck_joints"] == [3] and s["joint_follow_ratio"][3] == 0.0
     assert s["episodes_to_recover"] is None or s["episodes_to_recover"] == 1
     assert s["success"] == (s["episodes_to_recover"] is not None) and s["complete"] is True
     _check_data(d, s, 10, 7)
