@@ -3,9 +3,11 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
 
 A random episode and up to 4 learned healthy episodes (until one reaches), then the
 damage (the elbow stuck at its angle; ``--damage-mode zero`` straightens it), then up to
-4 learned damaged episodes (until the arm reaches again). The model keeps the healthy
-episodes with 100 times the damaged ones' noise variance, so that it follows the damaged
-arm where the two disagree (``--old-data-noise``; 1 weighs them as equals,
+4 learned damaged episodes (until the arm reaches again). The first damaged episode
+shows which joint stopped following its commands; from the next one on the agent stops
+commanding it and its model sees that joint's commands as 0, so the healthy episodes
+describe the damaged arm as well and count as equals (``--no-stop-stuck-joints``: they
+keep 100 times the damaged ones' noise variance instead, ``--old-data-noise``;
 ``--drop-old-data`` forgets them). Every reacher setting is a flag too (``--help``); the
 task is :mod:`pilco.tasks.adaptation`. Figure ``adaptation_distance.png``: the distance
 per step, healthy and damaged episodes.

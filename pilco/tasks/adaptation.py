@@ -112,7 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--old-data-noise", type=positive_float, default=100.0, metavar="F",
                    help="after the damage the model sees the healthy arm's transitions "
                         "with F times the noise variance of the damaged arm's, so that "
-                        "they give way where the two disagree (default 100; 1: as equals)")
+                        "they give way where the two disagree (default 100; 1: as equals; "
+                        "once --stop-stuck-joints found a stuck joint: 1)")
     g.add_argument("--changed-output-noise", type=positive_float, default=None, metavar="G",
                    help="from the second damaged episode on, the state dimensions whose "
                         "first damaged episode the healthy model explained badly (mean "
