@@ -93,7 +93,7 @@ def main(argv=None) -> int:
                         if k in os.environ},
             "pilco": ours, "port": port, "runs": runs}
         with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(results, f, indent=1)
+            json.dump(results, f, indent=2)
     return 0
 
 
