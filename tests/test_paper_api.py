@@ -187,8 +187,9 @@ def test_data_added_through_mgpr_set_data_are_what_the_agent_sees(tmp_path):
 # ------------------------------------------------ examples/pendulum.py and its sweep task
 @pytest.fixture(scope="module")
 def pendulum_runs(tmp_path_factory):
-    """``examples/pendulum.py`` and ``python -m pilco.tasks pendulum`` with tiny settings,
-    started together; ``{name: (directory, returncode, output)}``."""
+    """``examples/pendulum.py``, ``python -m pilco.tasks pendulum`` and the benchmark's
+    workload script with tiny settings, started together;
+    ``{name: (directory, returncode, output)}``."""
     base = tmp_path_factory.mktemp("pendulum")
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""),
                TF_CPP_MIN_LOG_LEVEL="3", OMP_NUM_THREADS="1")
@@ -199,6 +200,9 @@ def pendulum_runs(tmp_path_factory):
         "task": ["-m", "pilco.tasks", "pendulum", "--episodes", "2", "--random-episodes", "1",
                  "--horizon", "5", "--basis-functions", "2", "--policy-iters", "2",
                  "--model-iters", "2", "--quiet", "--output", str(base / "task")],
+        # the port's pendulum workload that benchmarks/bench_pendulum.py times
+        "workload": [os.path.join(ROOT, "benchmarks", "pendulum_workload.py"),
+                     "--iterations", "1", "--maxiter", "2", "--restarts", "1"],
     }
     procs = {name: subprocess.Popen([sys.executable, *cmd], cwd=ROOT, env=env, text=True,
                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
@@ -249,3 +253,19 @@ def test_pendulum_task_summary_for_the_sweep(pendulum_runs):
         np.testing.assert_allclose(agent["gp/noise"], 1e-3)
     for name in ("distance.png", "one_step.png", "final_episode.gif"):
         assert (d / name).exists(), name
+
+
+def test_the_benchmark_workload_runs_unchanged_on_this_library(pendulum_runs):
+    """``benchmarks/pendulum_workload.py`` (the port's pendulum example in the paper
+    code's API, which ``bench_pendulum.py`` also runs against the port): 4 random and 1
+    learned rollout of 40 steps, the phases timed, one JSON line."""
+    d, code, out = pendulum_runs["workload"]
+    assert code == 0, out[-3000:]
+    result = json.loads([line for line in out.splitlines() if line.startswith("{")][-1])
+    assert result["library"] == "pilco" and result["transitions"] == 200
+    (iteration,) = result["iterations"]
+    assert iteration["transitions"] == 160 and isinstance(iteration["up"], bool)
+    for phase in ("model", "policy", "rollout"):
+        assert 0.0 < iteration[phase] <= result["seconds"]
+    # each figure is rounded to 0.01 s
+    assert result["seconds"] >= result["setup"] + result["model"] + result["policy"] - 0.03
