@@ -95,8 +95,7 @@ class RunRecord:
             inert = np.concatenate([np.full(e.steps, number >= self.inert_from_episode)
                                     for number, e in episodes])
             columns = Y.shape[1] + np.asarray(self.inert_actions, dtype=int)
-            X = X.copy()
-            X[np.ix_(inert, columns)] = 0.0
+            X[np.ix_(inert, columns)] = 0.0  # X is stack_transitions' own new array
         if self.config.max_data is not None:
             X, Y = X[: self.config.max_data], Y[: self.config.max_data]
         return X, Y
