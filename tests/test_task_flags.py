@@ -105,3 +105,23 @@ def test_the_adaptation_down_weights_old_data_and_old_runs_resume_as_they_starte
     old.update(output=str(saved))
     (saved / "progress.json").write_text(json.dumps({"args": old}))
     assert adaptation.parse_args(["--resume", str(saved)]).old_data_noise == 1.0
+
+
+def test_the_healthy_reacher_stops_a_stalled_policy_search_and_the_others_do_not(tmp_path):
+    """The healthy reacher's policy searches end once the predicted return grew by less than
+    1 % over 5 iterations; the damaged arm, the adaptation and the paper-code preset run
+    every iteration, as measured; ``--policy-min-rel-improvement 0`` turns it off."""
+    out = ["--output", str(tmp_path / "run")]
+
+    def early_stop(args, damaged=False):
+        config = reacher.make_config(args, "damaged_reacher" if damaged else "reacher",
+                                     damaged)
+        return config.policy_early_stop_at(False), config.policy_patience
+
+    assert early_stop(reacher.parse_args(out)) == (0.01, 5)
+    assert early_stop(reacher.parse_args(out, damaged=True), damaged=True) == (None, 10)
+    # 0: a run never gains less than 0, so every iteration runs
+    assert early_stop(reacher.parse_args(["--preset", "paper-code", *out]))[0] == 0.0
+    assert early_stop(reacher.parse_args(["--policy-min-rel-improvement", "0", *out]))[0] == 0.0
+    adapted = adaptation.parse_args(out)
+    assert (adapted.policy_min_rel_improvement, adapted.policy_patience) == (None, 10)

@@ -85,6 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     # nor its policy initialised near the start state (seeds 10-19: 6/10 with it, 8/10
     # without; README)
     parser.set_defaults(policy_init_var=0.0)
+    # nor its early stop of the policy search (measured on the healthy reacher only)
+    parser.set_defaults(policy_min_rel_improvement=None, policy_patience=10)
     parser.description = "PILCO on the Fetch reacher, adapting to a joint damaged mid-run"
     # the elbow breaks where it is (stuck at its start angle), so the arm starts where the
     # healthy one did and the healthy cost width still applies; --damage-mode zero

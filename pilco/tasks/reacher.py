@@ -38,7 +38,12 @@ Settings the paper leaves open (chosen here, every one a flag):
   (:func:`init_policy_near`); 0 draws the centres from N(0, I), which puts most of them
   far from the arm's states (its joint angles start at -1 and 2 rad). Seeds 0-19: 20/20
   with it, 17/20 without (README).
-- ``--policy-iters`` 25 and ``--model-iters`` 100 L-BFGS iterations, 1 restart each.
+- ``--policy-iters`` 25 and ``--model-iters`` 100 L-BFGS iterations, 1 restart each; a
+  policy search of the healthy arm stops once its predicted return grew by less than 1 %
+  over 5 iterations (``--policy-min-rel-improvement`` 0.01, ``--policy-patience`` 5; 0
+  turns it off, the damaged arm's default): seeds 0-19 succeed 20/20 with and without
+  it, in 34 instead of 46 s per run median; the last episode reaches the target in 5.5
+  instead of 4 steps median (README, "Success rates").
 - GP-input columns that are constant in the data (a damaged joint) get a long lengthscale
   after every model fit (:func:`ignore_constant_inputs`).
 - ``--gp-priors none``: maximum evidence; ``paper`` puts the paper code's Gamma priors
@@ -46,8 +51,9 @@ Settings the paper leaves open (chosen here, every one a flag):
 
 ``--preset paper-code`` starts from the published scripts' settings
 (:data:`PAPER_CODE`: planning horizon 100, ``S_init = 0.1 I``, one cost of width 1 m,
-30 policy iterations (60 the first time), the first 100 transitions, commanded joint
-angles in the state, the GP priors; the damaged arm straightens on the first step).
+30 policy iterations (60 the first time, no early stop), the first 100 transitions,
+commanded joint angles in the state, the GP priors; the damaged arm straightens on the
+first step).
 
 Frames of the final episode are rendered by replaying its joint angles in another
 process (MuJoCo's EGL renderer and TensorFlow cannot share a process).
@@ -78,7 +84,7 @@ PAPER_SECONDS = {"interaction": 21.22, "model": 37.53, "policy": 1380.95, "total
 PAPER_CODE = dict(planning_horizon=100, start_var=0.1, cost_width=1.0, fine_cost_width=0.0,
                   limit_cost=0.0, policy_iters=30, policy_iters_first=60, max_data=100,
                   joint_state="commanded", gp_priors="paper", early_start_var=0.0,
-                  policy_init_var=0.0)
+                  policy_init_var=0.0, policy_min_rel_improvement=0.0)
 
 #: The paper code's priors on every dynamics GP's hyperparameters (GPflow 1's Gamma(shape,
 #: scale)): lengthscales ~ Gamma(1, 10), signal variance ~ Gamma(1.5, 2); training is then
@@ -104,6 +110,8 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     add_common_arguments(parser, episodes=4, steps=50, basis_functions=50, policy_iters=25,
                          model_iters=100, policy_restarts=1, model_restarts=1, max_data=None,
+                         policy_min_rel_improvement=None if damaged else 0.01,
+                         policy_patience=10 if damaged else 5,
                          output=f"runs/{name}-seed{{seed}}")
     presets = {"paper-code": dict(PAPER_CODE, **({"damage_mode": "zero_on_step"}
                                                  if damaged else {}))}
