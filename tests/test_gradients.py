@@ -116,20 +116,6 @@ def test_policy_objective_gradient_matches_finite_differences(kind, squash, angl
     # restoring the variables restores the objective
     assert float(p._rollout.policy_loss().numpy()) == pytest.approx(loss0, rel=1e-12)
 
-    # inside a compiled function (the optimiser's objective) the horizon is built into the
-    # caller's graph instead of calling the compiled rollout: the same value and gradient
-    @tf.function(autograph=False)
-    def inside():
-        with tf.GradientTape() as inner:
-            value = p._rollout.policy_loss()
-        return value, inner.gradient(value, variables)
-
-    value, inner_grads = inside()
-    assert float(value.numpy()) == pytest.approx(loss0, rel=1e-12)
-    for grad, inner_grad in zip(grads, inner_grads):
-        np.testing.assert_allclose(tf.convert_to_tensor(inner_grad).numpy(),
-                                   tf.convert_to_tensor(grad).numpy(), rtol=1e-9, atol=1e-14)
-
 
 # ---------------------------------------------------------------------------
 # Moment matching of the dynamics model w.r.t. its input distribution

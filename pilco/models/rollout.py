@@ -167,14 +167,8 @@ class Rollout(gpflow.base.Module):
 
     def policy_loss(self):
         """The policy objective: minus the total expected reward of ``horizon`` steps from
-        ``N(m_init, S_init)`` (a scalar), with the dynamics model of the last refresh.
-
-        Inside a function being compiled (the optimiser's objective and gradient) the
-        horizon's graph goes straight into it instead of through the compiled
-        :attr:`total_reward`: the same operations, ~0.4 s less tracing and compiling
-        per process on the reacher's problem."""
-        total_reward = self._total_reward if tf.inside_function() else self.total_reward
-        _, _, total = total_reward(
+        ``N(m_init, S_init)`` (a scalar), with the dynamics model of the last refresh."""
+        _, _, total = self.total_reward(
             tf.convert_to_tensor(self.m_init), tf.convert_to_tensor(self.S_init),
             tf.convert_to_tensor(self.horizon),
         )
