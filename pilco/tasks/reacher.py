@@ -41,7 +41,7 @@ Settings the paper leaves open (chosen here, every one a flag):
 - ``--policy-iters`` 25 and ``--model-iters`` 100 L-BFGS iterations, 1 restart each; a
   policy search of the healthy arm stops once its predicted return grew by less than 1 %
   over 5 iterations (``--policy-min-rel-improvement`` 0.01, ``--policy-patience`` 5; 0
-  turns it off, the damaged arm's default): seeds 0-19 succeed 20/20 with and without
+  turns it off; the damaged arm runs without it): seeds 0-19 succeed 20/20 with and without
   it, in 34 instead of 46 s per run median; the last episode reaches the target in 5.5
   instead of 4 steps median (README, "Success rates").
 - GP-input columns that are constant in the data (a damaged joint) get a long lengthscale
