@@ -11,6 +11,10 @@ the ratio, and whether each run swung the pendulum up. The port's environment ne
     python benchmarks/bench_pendulum.py --port /path/to/PILCO \\
         --port-python /path/to/port-venv/bin/python [--rounds 1] [--json out.json]
 
+The port runs without GPflow's compile cache unless ``--port-compile-cache`` (with it,
+its optimisations after the first use the first iteration's data: see
+``pendulum_workload.py``).
+
 Threads: both processes get this process's environment, so
 ``TF_NUM_INTRAOP_THREADS=1 python benchmarks/bench_pendulum.py ...`` times both with the
 setting of this library's tasks.
@@ -28,12 +32,15 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 PHASES = ("seconds", "model", "policy", "rollout", "setup")
 
 
-def run_workload(python: str, port: str | None, seed: int, iterations: int) -> dict:
+def run_workload(python: str, port: str | None, seed: int, iterations: int,
+                 port_compile_cache: bool = False) -> dict:
     """One fresh process of ``pendulum_workload.py``; its JSON line."""
     cmd = [python, os.path.join(HERE, "pendulum_workload.py"), "--seed", str(seed),
            "--iterations", str(iterations)]
     if port:
         cmd += ["--port", port]
+        if port_compile_cache:
+            cmd += ["--port-compile-cache"]
     env = dict(os.environ, TF_CPP_MIN_LOG_LEVEL="2")
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     lines = [line for line in out.stdout.splitlines() if line.startswith("{")]
@@ -58,6 +65,10 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=1, help="runs of each library")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--iterations", type=int, default=8)
+    parser.add_argument("--port-compile-cache", action="store_true",
+                        help="time the port with GPflow's compile cache, under which its "
+                             "optimisations after the first use the first data "
+                             "(pendulum_workload.py)")
     parser.add_argument("--json", default=None, help="add the results to this file")
     args = parser.parse_args(argv)
     if args.rounds < 1 or args.iterations < 1:
@@ -69,7 +80,8 @@ def main(argv=None) -> int:
     for r in range(args.rounds):
         for name, python, port in (("pilco", sys.executable, None),
                                    ("port", args.port_python, args.port)):
-            result = run_workload(python, port, args.seed, args.iterations)
+            result = run_workload(python, port, args.seed, args.iterations,
+                                  args.port_compile_cache)
             runs[name].append(result)
             print(f"round {r + 1} {name:5s}: {result['seconds']:7.1f} s (GP training "
                   f"{result['model']:.1f}, policy search {result['policy']:.1f}, rollouts "
@@ -86,8 +98,10 @@ def main(argv=None) -> int:
         if os.path.exists(args.json):
             with open(args.json, encoding="utf-8") as f:
                 results = json.load(f)
-        results["pendulum_workload"] = {
-            "seed": args.seed, "iterations": args.iterations, "rounds": args.rounds,
+        key = "pendulum_workload" + ("_port_compile_cache" if args.port_compile_cache else "")
+        results[key] = {
+            "seed": args.seed, "port_compile_cache": args.port_compile_cache,
+            "iterations": args.iterations, "rounds": args.rounds,
             "threads": {k: os.environ[k] for k in ("TF_NUM_INTRAOP_THREADS",
                                                    "TF_NUM_INTEROP_THREADS")
                         if k in os.environ},
