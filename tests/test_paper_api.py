@@ -19,6 +19,7 @@ from gpflow import set_trainable
 from pilco.controllers import RbfController
 from pilco.models import PILCO
 from pilco.rewards import ExponentialReward
+from pilco.snapshots import restore, snapshot
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 M_INIT = np.reshape([-1.0, 0.0, 0.0], (1, 3))
@@ -184,8 +185,12 @@ def test_data_added_through_mgpr_set_data_are_what_the_agent_sees(tmp_path):
         np.testing.assert_allclose(a, b, rtol=1e-8)
 
 
-def _values(module):
-    return [v.numpy().copy() for v in module.trainable_variables]
+def assert_same_values(module, expected, **tolerance):
+    """Every parameter of ``module`` as in ``expected`` (a module of the same structure)."""
+    got, want = snapshot(module), snapshot(expected)
+    assert got.keys() == want.keys()
+    for path, value in want.items():
+        np.testing.assert_allclose(got[path], value, err_msg=path, **tolerance)
 
 
 def test_training_after_mgpr_set_data_uses_the_new_data():
@@ -206,23 +211,17 @@ def test_training_after_mgpr_set_data_uses_the_new_data():
 
     fresh = paper_agent((X_all, Y_all))
     fix_noise(fresh)
-    for a, b in zip(fresh.mgpr.models, used.mgpr.models):
-        for va, vb in zip(a.trainable_variables, b.trainable_variables):
-            va.assign(vb)
-    for va, vb in zip(fresh.controller.trainable_variables, used.controller.trainable_variables):
-        va.assign(vb)
+    restore(fresh.mgpr, snapshot(used.mgpr))
+    restore(fresh.controller, snapshot(used.controller))
     assert fresh.expected_return() == pytest.approx(used.expected_return(), rel=1e-10)
 
     used.optimize_models(maxiter=3)
     fresh.optimize_models(maxiter=3)
-    for a, b in zip(fresh.mgpr.models, used.mgpr.models):
-        for va, vb in zip(_values(a), _values(b)):
-            np.testing.assert_allclose(vb, va, rtol=1e-8)
+    assert_same_values(used.mgpr, fresh.mgpr, rtol=1e-8)
     best_used = used.optimize_policy(maxiter=3)
     best_fresh = fresh.optimize_policy(maxiter=3)
     assert best_used == pytest.approx(best_fresh, rel=1e-8)
-    for va, vb in zip(_values(fresh.controller), _values(used.controller)):
-        np.testing.assert_allclose(vb, va, rtol=1e-8, atol=1e-12)
+    assert_same_values(used.controller, fresh.controller, rtol=1e-8, atol=1e-12)
 
 
 # ------------------------------------------------ examples/pendulum.py and its sweep task
