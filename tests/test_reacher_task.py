@@ -375,3 +375,42 @@ def test_a_resumed_paper_run_gets_its_priors_back(tmp_path):
     x = first.episodes[-1].states[-1]  # read from agent.npz, not rebuilt: the same policy
     np.testing.assert_allclose(resumed.agent.compute_action(x), first.agent.compute_action(x))
     assert priors_of(resumed.agent) == [((1.0, 10.0), (1.5, 2.0))] * 10
+
+
+def test_a_drawn_target_comes_from_the_seed_and_stays_in_its_cube():
+    from pilco.envs.fetch_reacher import DEFAULT_TARGET
+
+    def target(*flags):
+        return reacher.env_kwargs(reacher.parse_args(list(flags)), False).get("target")
+
+    assert target() is None and target("--seed", "3") is None  # the env's default
+    assert target("--target", "1.0", "0.5", "0.4") == (1.0, 0.5, 0.4)
+    drawn = {s: np.array(target("--seed", str(s), "--target-spread", "0.15")) for s in range(8)}
+    for t in drawn.values():
+        assert np.all(np.abs(t - DEFAULT_TARGET) <= 0.15)
+    assert len({tuple(t) for t in drawn.values()}) == 8  # every seed its own target
+    np.testing.assert_array_equal(drawn[3], target("--seed", "3", "--target-spread", "0.15"))
+    # around --target, and the draw scales with the spread
+    near = np.array(target("--seed", "3", "--target", "1.0", "0.5", "0.4",
+                           "--target-spread", "0.05"))
+    np.testing.assert_allclose(near - [1.0, 0.5, 0.4], (drawn[3] - DEFAULT_TARGET) / 3,
+                               atol=1e-15)
+    # the damaged arm and the adaptation read the same flag
+    damaged = reacher.parse_args(["--seed", "3", "--target-spread", "0.15"], damaged=True)
+    np.testing.assert_array_equal(reacher.env_kwargs(damaged, True)["target"], drawn[3])
+    with pytest.raises(SystemExit):
+        reacher.parse_args(["--target-spread", "-0.1"])
+
+
+def test_a_drawn_target_out_of_reach_is_reported(caplog):
+    import logging
+
+    from pilco.envs import FETCH_ID
+    from pilco.experiment import make_env
+
+    with caplog.at_level(logging.INFO, logger="pilco.tasks.reacher"):
+        reacher.check_drawn_target(make_env(FETCH_ID, {"target": (1.25, 0.4, 0.4)}))
+        reacher.check_drawn_target(make_env(FETCH_ID, {"target": (3.0, 3.0, 3.0)}))
+    near, far = caplog.records
+    assert near.levelno == logging.INFO and "reachable in" in near.getMessage()
+    assert far.levelno == logging.WARNING and "the success rule allows 15" in far.getMessage()

@@ -55,12 +55,17 @@ Settings the paper leaves open (chosen here, every one a flag):
 commanded joint angles in the state, the GP priors; the damaged arm straightens on the
 first step).
 
+``--target-spread S`` draws the target uniformly in the cube of half-width ``S`` [m]
+around ``--target`` (default the env's (1.2, 0.38, 0.38)) from the run's seed
+(:func:`draw_target`), so that a sweep over seeds also varies the target.
+
 Frames of the final episode are rendered by replaying its joint angles in another
 process (MuJoCo's EGL renderer and TensorFlow cannot share a process).
 """
 from __future__ import annotations
 
 import argparse
+import logging
 from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
@@ -73,6 +78,7 @@ from ..experiment.cli import (add_common_arguments, add_preset_argument, finish,
 __all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
            "ignore_constant_inputs", "limit_bumps", "set_gp_priors", "make_experiment", "figures",
            "reached_within", "parse_args", "main", "SUCCESS_STEPS", "position_weights",
+           "draw_target",
            "main_position_reward", "schedule", "init_policy_near", "ADDED_LATER"]
 
 
@@ -95,7 +101,14 @@ PAPER_GP_PRIORS = {"lengthscales": (1.0, 10.0), "variance": (1.5, 2.0)}
 #: ``--resume`` (they ran without the fine and joint-limit costs and the schedule, with
 #: policy centres from N(0, I)).
 ADDED_LATER = dict(fine_cost_width=0.0, limit_cost=0.0, early_cost_width=0.0,
-                   early_start_var=0.0, gp_priors="none", policy_init_var=0.0)
+                   early_start_var=0.0, gp_priors="none", policy_init_var=0.0,
+                   target_spread=0.0)
+
+logger = logging.getLogger(__name__)
+
+#: mixed with the run's seed into the generator of :func:`draw_target`, so that the
+#: target's draw is independent of the run's other draws of the same seed
+TARGET_STREAM = 3
 
 #: success: the last episode reaches the target within this many steps
 SUCCESS_STEPS = 15
@@ -158,6 +171,9 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                    help="run every episode for the full horizon even at the target")
     g.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                    help="target position [m] (default the env's (1.2, 0.38, 0.38))")
+    g.add_argument("--target-spread", type=non_negative_float, default=0.0, metavar="S",
+                   help="draw the target uniformly within ±S m per axis of --target (or of "
+                        "the default target) from the run's seed; 0: no draw")
     g.add_argument("--start-noise", type=non_negative_float, default=0.0,
                    help="std [rad] of noise on the start joint angles")
     g.add_argument("--damage-mode", choices=("zero", "zero_on_step", "stuck"), default="zero",
@@ -184,13 +200,47 @@ def env_kwargs(args: argparse.Namespace, damaged: bool) -> Dict[str, Any]:
               joint_state=getattr(args, "joint_state", "measured"),
               start_noise=args.start_noise, render_width=args.render_size[0],
               render_height=args.render_size[1])
-    if args.target is not None:
+    spread = getattr(args, "target_spread", 0.0)
+    if spread > 0:
+        kw["target"] = tuple(draw_target(args.seed, spread, args.target))
+    elif args.target is not None:
         kw["target"] = tuple(args.target)
     if damaged:
         kw.update(damaged_joints=tuple(args.damaged_joints), damage_mode=args.damage_mode)
     if args.no_early_stop:
         kw["distance_threshold"] = 0.0  # the env never terminates; success still counted
     return kw
+
+
+def draw_target(seed: int, spread: float, around: Optional[Sequence[float]] = None
+                ) -> np.ndarray:
+    """A target [3] drawn uniformly within ±``spread`` m per axis of ``around`` (default
+    the env's default target), from a generator of ``(TARGET_STREAM, seed)``: the same
+    seed gives the same target. Whether the arm can reach it within the success rule:
+    :func:`pilco.envs.fewest_steps`."""
+    from ..envs.fetch_reacher import DEFAULT_TARGET
+
+    centre = np.asarray(DEFAULT_TARGET if around is None else around, dtype=np.float64)
+    rng = np.random.default_rng([TARGET_STREAM, int(seed)])
+    return centre + rng.uniform(-spread, spread, size=3)
+
+
+def check_drawn_target(env) -> None:
+    """Log a drawn target and the fewest steps that reach it; warn when the success
+    rule's steps cannot (the run goes on: its rate then says so)."""
+    from ..envs import fewest_steps
+
+    target = np.round(env.unwrapped.target, 4).tolist()
+    try:
+        steps = fewest_steps(env, starts=16).steps
+    except ValueError:
+        steps = None
+    if steps is None or steps > SUCCESS_STEPS:
+        logger.warning("drawn target %s: the arm needs %s steps at least, the success "
+                       "rule allows %d", target, "more than any search found" if steps is None
+                       else steps, SUCCESS_STEPS)
+    else:
+        logger.info("drawn target %s: reachable in %d steps at least", target, steps)
 
 
 def make_config(args: argparse.Namespace, task: str, damaged: bool) -> ExperimentConfig:
@@ -376,6 +426,8 @@ def make_experiment(args: argparse.Namespace, task: str = "reacher",
     if wrap_env is not None:
         env = wrap_env(env)
     target = env.unwrapped.target
+    if getattr(args, "target_spread", 0.0) > 0:
+        check_drawn_target(env)
 
     def render(episode):
         return plotting.replay_fetch_frames(episode.states[:, 3:10], target,
