@@ -396,8 +396,12 @@ def test_a_drawn_target_comes_from_the_seed_and_stays_in_its_cube():
     np.testing.assert_allclose(near - [1.0, 0.5, 0.4], (drawn[3] - DEFAULT_TARGET) / 3,
                                atol=1e-15)
     # the damaged arm and the adaptation read the same flag
+    from pilco.tasks import adaptation
+
     damaged = reacher.parse_args(["--seed", "3", "--target-spread", "0.15"], damaged=True)
     np.testing.assert_array_equal(reacher.env_kwargs(damaged, True)["target"], drawn[3])
+    adapting = adaptation.parse_args(["--seed", "3", "--target-spread", "0.15"])
+    np.testing.assert_array_equal(reacher.env_kwargs(adapting, False)["target"], drawn[3])
     with pytest.raises(SystemExit):
         reacher.parse_args(["--target-spread", "-0.1"])
 

@@ -78,7 +78,7 @@ from ..experiment.cli import (add_common_arguments, add_preset_argument, finish,
 __all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
            "ignore_constant_inputs", "limit_bumps", "set_gp_priors", "make_experiment", "figures",
            "reached_within", "parse_args", "main", "SUCCESS_STEPS", "position_weights",
-           "draw_target",
+           "draw_target", "check_drawn_target",
            "main_position_reward", "schedule", "init_policy_near", "ADDED_LATER"]
 
 
