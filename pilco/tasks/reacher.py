@@ -200,9 +200,8 @@ def env_kwargs(args: argparse.Namespace, damaged: bool) -> Dict[str, Any]:
               joint_state=getattr(args, "joint_state", "measured"),
               start_noise=args.start_noise, render_width=args.render_size[0],
               render_height=args.render_size[1])
-    spread = getattr(args, "target_spread", 0.0)
-    if spread > 0:
-        kw["target"] = tuple(draw_target(args.seed, spread, args.target))
+    if args.target_spread > 0:
+        kw["target"] = tuple(draw_target(args.seed, args.target_spread, args.target))
     elif args.target is not None:
         kw["target"] = tuple(args.target)
     if damaged:
@@ -426,7 +425,7 @@ def make_experiment(args: argparse.Namespace, task: str = "reacher",
     if wrap_env is not None:
         env = wrap_env(env)
     target = env.unwrapped.target
-    if getattr(args, "target_spread", 0.0) > 0:
+    if args.target_spread > 0:
         check_drawn_target(env)
 
     def render(episode):
