@@ -301,8 +301,10 @@ def _start_ray(args: argparse.Namespace) -> Tuple[bool, float]:
         root = os.path.dirname(os.path.dirname(os.path.abspath(pilco.__file__)))
         paths = [root, *[p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]]
         os.environ["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
-        ray.init(num_cpus=args.num_cpus, include_dashboard=False, log_to_driver=False,
-                 logging_level=logging.WARNING)
+        # address="local": always a new Ray of this process's own, never a cluster that
+        # runs (or ran) on this machine and left its address in Ray's temp folder
+        ray.init(address="local", num_cpus=args.num_cpus, include_dashboard=False,
+                 log_to_driver=False, logging_level=logging.WARNING)
     seconds = time.perf_counter() - t0
     logger.info("Ray %s in %.1f s: %s CPUs", "connected" if args.address else "started",
                 seconds, ray.cluster_resources().get("CPU"))
