@@ -2,7 +2,7 @@
 mid-run and keep learning with the same agent (the paper's motivation, §5.2).
 
 A random episode and up to 4 learned healthy episodes (until one reaches), then the
-damage (the elbow stuck at its angle; ``--damage-mode zero`` straightens it), then up to
+damage (the elbow stuck at its angle; ``--damage-mode straight`` straightens it), then up to
 4 learned damaged episodes (until the arm reaches again). The first damaged episode
 shows which joint stopped following its commands; from the next one on the agent stops
 commanding it and its model sees that joint's commands as 0, so the healthy episodes

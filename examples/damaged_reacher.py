@@ -1,10 +1,12 @@
 """PILCO on the damaged 7-DoF Fetch reacher (paper §5.2).
 
-The reacher of ``examples/reacher.py`` with its elbow (``elbow_flex``) ignoring every
-command: forced to 0 rad as in the paper (``--damage-mode zero``, default) or stuck where
-it was (``--damage-mode stuck``). The policy is not told. The straightened arm starts
-~1.1 m from the target, so the default cost is wider (``--cost-width 0.4``). Every
-setting is a flag (``--help``); the task is :mod:`pilco.tasks.reacher` (``damaged=True``).
+The reacher of ``examples/reacher.py`` with its elbow (``elbow_flex``) motor unresponsive,
+as in the paper: the joint ignores every command and stays at its start angle
+(``--damage-mode stuck``, default); the policy is not told. ``--damage-mode straight``
+forces the elbow to 0 rad instead, a harder variant whose arm starts ~1.2 m from the
+target (give it a wider cost, e.g. ``--cost-width 0.4``). ``--preset paper-code`` runs
+the published damaged-arm script's settings. Every setting is a flag (``--help``); the
+task is :mod:`pilco.tasks.reacher` (``damaged=True``).
 
 Usage::
 

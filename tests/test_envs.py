@@ -343,8 +343,25 @@ def test_fetch_terminates_within_threshold(fetch_cls):
     assert not term and info["distance"] == pytest.approx(0.06)
 
 
-def test_fetch_damaged_zero_mode(fetch_cls):
+def test_fetch_damaged_default_is_stuck_at_the_start_angle(fetch_cls):
     env = gymnasium.make(FETCH_DAMAGED_ID)
+    healthy = gymnasium.make(FETCH_ID)
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_array_equal(obs, healthy.reset(seed=0)[0])  # the healthy start pose
+    assert obs[3 + ELBOW] == START[ELBOW]
+    rng = np.random.default_rng(0)
+    for _ in range(8):  # any command, within the bound or beyond it
+        obs, _, _, _, info = env.step(rng.uniform(-0.5, 0.5, 7))
+        assert obs[3 + ELBOW] == START[ELBOW] and info["qpos"][ELBOW] == START[ELBOW]
+        np.testing.assert_allclose(obs[:3], env.unwrapped.forward_kinematics(info["qpos"]),
+                                   atol=1e-12)
+    assert np.all(np.abs(np.delete(obs[3:], ELBOW) - np.delete(START, ELBOW)) > 1e-3)
+    env.close()
+    healthy.close()
+
+
+def test_fetch_damaged_straight_mode(fetch_cls):
+    env = gymnasium.make(FETCH_DAMAGED_ID, damage_mode="straight")
     obs, _ = env.reset(seed=0)
     assert obs[3 + ELBOW] == 0.0
     np.testing.assert_allclose(np.delete(obs[3:], ELBOW), np.delete(START, ELBOW))
@@ -357,7 +374,7 @@ def test_fetch_damaged_zero_mode(fetch_cls):
 
 
 def test_fetch_damaged_pose_reaches_default_target(fetch_cls):
-    env = fetch_cls(damaged_joints=("elbow_flex",))
+    env = fetch_cls(damaged_joints=("elbow_flex",), damage_mode="straight")
     _, info = env.reset(options={"qpos": DAMAGED_REACH_POSE})
     assert info["qpos"][ELBOW] == 0.0
     assert info["distance"] < 0.005  # reachable without the elbow: found 0.4 mm
@@ -381,7 +398,7 @@ def test_fetch_stuck_mode_and_runtime_damage(fetch_cls):
     for _ in range(3):
         obs, *_ = env.step(np.full(7, 0.05))
     assert obs[3 + 5] == held and obs[3 + ELBOW] == pytest.approx(2.2)
-    env.damage(("elbow_flex",), mode="zero")  # replaces the previous damage
+    env.damage(("elbow_flex",), mode="straight")  # replaces the previous damage
     obs, *_ = env.step(np.full(7, 0.05))
     assert obs[3 + ELBOW] == 0.0 and obs[3 + 5] == pytest.approx(held + 0.05)
     env.repair()

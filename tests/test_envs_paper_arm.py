@@ -1,6 +1,7 @@
 """The Fetch arm of the paper's published scripts, as options of FetchJointReacher:
-commanded joint angles in the state (``joint_state="commanded"``) and the damaged elbow
-that is healthy at reset and 0 rad from the first step on (``damage_mode="zero_on_step"``)."""
+commanded joint angles in the state (``joint_state="commanded"``), the damaged elbow stuck
+at its start angle (``damage_mode="stuck"``, the default) and the straightened variant
+(``damage_mode="straight"``)."""
 from __future__ import annotations
 
 import gymnasium
@@ -40,12 +41,13 @@ def rollout(env, actions, seed=0):
     return out
 
 
-def test_defaults_are_measured_and_zero():
+def test_defaults_are_measured_and_stuck():
     env = FetchJointReacher()
-    assert env.joint_state == "measured" and env.damage_mode == "zero"
+    assert env.joint_state == "measured" and env.damage_mode == "stuck"
     damaged = gymnasium.make(FETCH_DAMAGED_ID)
     assert damaged.unwrapped.joint_state == "measured"
-    assert damaged.unwrapped.damage_mode == "zero"
+    assert damaged.unwrapped.damage_mode == "stuck"
+    assert damaged.unwrapped.damaged_joints == ("elbow_flex",)
 
 
 def test_commanded_state_is_start_plus_sum_of_clipped_actions():
@@ -82,81 +84,84 @@ def test_commanded_angles_pass_the_joint_limits_the_arm_keeps():
     assert obs[3] == pytest.approx(1.9) and env.qpos[0] == pytest.approx(1.6056)
 
 
-def test_zero_on_step_resets_healthy_and_jumps_at_the_first_step():
+def test_stuck_elbow_with_commanded_state_starts_healthy_and_never_moves():
     healthy = FetchJointReacher(joint_state="commanded")
     env = FetchJointReacher(joint_state="commanded", damaged_joints=("elbow_flex",),
-                    damage_mode="zero_on_step")
+                            damage_mode="stuck")
     h_steps, d_steps = rollout(healthy, ACTIONS), rollout(env, ACTIONS)
     (h0, _, _), (d0, _, d0_info) = h_steps[0], d_steps[0]
     np.testing.assert_array_equal(d0, h0)  # the reset pose is the healthy one
     assert d0_info["qpos"][ELBOW] == 2.0
-    (h1, _, _), (d1, _, d1_info) = h_steps[1], d_steps[1]
-    assert d1_info["qpos"][ELBOW] == 0.0  # the arm is straightened ...
-    assert d1[3 + ELBOW] == pytest.approx(2.0 - 0.01)  # ... the state keeps the command
-    np.testing.assert_array_equal(d1[3:], h1[3:])
-    healthy_move = np.linalg.norm(h1[:3] - h0[:3])
-    jump = np.linalg.norm(d1[:3] - d0[:3])
-    assert healthy_move < 0.15 and jump > 0.5  # the first transition jumps
     clipped = np.clip(ACTIONS, -0.1, 0.1)
     for k, (obs, reward, info) in enumerate(d_steps[1:], start=1):
-        assert info["qpos"][ELBOW] == 0.0
+        assert info["qpos"][ELBOW] == 2.0  # the arm's elbow stays at its start angle
+        # the state keeps the command, the running sum of the actions, elbow included
         np.testing.assert_allclose(obs[3:], START + clipped[:k].sum(axis=0), atol=1e-12)
-        # distances use the real gripper, i.e. the straightened arm
+        # the gripper and the distance are the real, damaged arm's
         np.testing.assert_allclose(obs[:3], env.forward_kinematics(info["qpos"]), atol=1e-12)
         assert info["distance"] == pytest.approx(np.linalg.norm(obs[:3] - env.target))
         assert reward == pytest.approx(-info["distance"])
-    obs, info = env.reset(seed=1)  # every episode starts healthy again
+    # the other joints move as the healthy arm's do
+    h_last, d_last = h_steps[-1][2]["qpos"], d_steps[-1][2]["qpos"]
+    np.testing.assert_allclose(np.delete(d_last, ELBOW), np.delete(h_last, ELBOW), atol=1e-12)
+    assert h_last[ELBOW] != pytest.approx(2.0)
+    obs, info = env.reset(seed=1)  # every episode starts in the healthy pose again
     assert info["qpos"][ELBOW] == 2.0 and obs[3 + ELBOW] == 2.0
 
 
-def test_zero_on_step_with_measured_state():
-    env = FetchJointReacher(damaged_joints="elbow_flex", damage_mode="zero_on_step")
-    obs, _ = env.reset(seed=0)
-    assert obs[3 + ELBOW] == 2.0
-    obs, *_ = env.step(np.full(7, 0.1))
-    assert obs[3 + ELBOW] == 0.0
-    np.testing.assert_allclose(env.commanded_qpos, START + 0.1, atol=1e-12)
-
-
-def test_zero_mode_with_commanded_state_keeps_the_command():
-    env = FetchJointReacher(joint_state="commanded", damaged_joints="elbow_flex")
+def test_straight_mode_with_commanded_state_keeps_the_command():
+    env = FetchJointReacher(joint_state="commanded", damaged_joints="elbow_flex",
+                            damage_mode="straight")
     obs, info = env.reset(seed=0)
     assert info["qpos"][ELBOW] == 0.0 and obs[3 + ELBOW] == 2.0  # zeroed at reset already
     obs, _, _, _, info = env.step(np.full(7, -0.1))
     assert info["qpos"][ELBOW] == 0.0 and obs[3 + ELBOW] == pytest.approx(1.9)
 
 
-def test_runtime_zero_on_step_damage_spares_the_next_reset():
+def test_earlier_mode_names():
+    # runs saved with the straightened arm's earlier name resume with it
+    assert FetchJointReacher(damaged_joints="elbow_flex", damage_mode="zero").damage_mode \
+        == "straight"
+    with pytest.raises(ValueError, match="zero_on_step.*removed.*stuck"):
+        FetchJointReacher(damaged_joints="elbow_flex", damage_mode="zero_on_step")
+
+
+def test_runtime_damage_holds_the_angle_it_found():
     env = FetchJointReacher()
     env.reset(seed=0)
-    env.damage("elbow_flex", mode="zero_on_step")
-    assert env.damage_mode == "zero_on_step"
-    obs, *_ = env.step(np.zeros(7))
-    assert obs[3 + ELBOW] == 0.0
-    obs, _ = env.reset(seed=0)
+    env.step(np.full(7, 0.05))
+    env.damage("elbow_flex")  # the default mode: stuck where it is now
+    assert env.damage_mode == "stuck"
+    for _ in range(3):
+        obs, *_ = env.step(np.full(7, 0.1))
+    assert obs[3 + ELBOW] == pytest.approx(2.05)
+    obs, _ = env.reset(seed=0)  # after a reset: stuck at the start pose's angle
+    assert obs[3 + ELBOW] == 2.0
+    obs, *_ = env.step(np.full(7, -0.1))
     assert obs[3 + ELBOW] == 2.0
     env.repair()
-    obs, *_ = env.step(np.zeros(7))
-    assert obs[3 + ELBOW] == 2.0
+    obs, *_ = env.step(np.full(7, -0.1))
+    assert obs[3 + ELBOW] == pytest.approx(1.9)
 
 
 def test_options_through_gymnasium_make():
     kwargs = {"joint_state": "commanded", "damaged_joints": ("elbow_flex",),
-              "damage_mode": "zero_on_step"}
+              "damage_mode": "straight"}
     made = gymnasium.make(FETCH_ID, **kwargs)
     assert made.spec.max_episode_steps == 50
     direct = FetchJointReacher(**kwargs)
     for (om, rm, _), (od, rd, _) in zip(rollout(made, ACTIONS), rollout(direct, ACTIONS)):
         np.testing.assert_array_equal(om, od)
         assert rm == rd
-    damaged = gymnasium.make(FETCH_DAMAGED_ID, damage_mode="zero_on_step", joint_state="commanded")
+    damaged = gymnasium.make(FETCH_DAMAGED_ID, joint_state="commanded", max_action=0.3)
     obs, info = damaged.reset(seed=0)
     assert obs[3 + ELBOW] == 2.0 and info["qpos"][ELBOW] == 2.0
-    obs, _, _, _, info = damaged.step(np.zeros(7))
-    assert obs[3 + ELBOW] == 2.0 and info["qpos"][ELBOW] == 0.0
+    obs, _, _, _, info = damaged.step(np.full(7, 0.3))
+    assert obs[3 + ELBOW] == pytest.approx(2.3) and info["qpos"][ELBOW] == 2.0
+    assert info["qpos"][0] == pytest.approx(0.3)  # steps of up to 0.3 rad
 
 
 @pytest.mark.filterwarnings("ignore:.*(infinity|symmetric and normalized).*:UserWarning")
 def test_paper_arm_passes_gymnasium_checker():
     check_env(FetchJointReacher(joint_state="commanded", damaged_joints="elbow_flex",
-                        damage_mode="zero_on_step", start_noise=0.01), skip_render_check=True)
+                                damage_mode="stuck", start_noise=0.01), skip_render_check=True)

@@ -425,9 +425,15 @@ def test_the_reacher_paper_code_preset():
             args.max_data) == (100, 0.1, 30, 60, 100)
     assert args.cost_width == 0.5  # a flag given wins over the preset
     kw = reacher.env_kwargs(args, damaged=True)
-    assert kw["joint_state"] == "commanded" and kw["damage_mode"] == "zero_on_step"
+    assert kw["joint_state"] == "commanded" and kw["damage_mode"] == "stuck"
+    # the published damaged-arm script: 25 steps of up to 0.3 rad
+    assert (args.horizon, args.max_action, kw["max_action"]) == (25, 0.3, 0.3)
+    assert args.policy_min_rel_improvement == 0.0  # no early stop, as the script
+    config = reacher.make_config(args, "damaged_reacher", damaged=True)
+    assert config.steps == 25 and config.env_kwargs["max_episode_steps"] == 25
     paper = reacher.parse_args(["--preset", "paper-code"])  # one cost, as the paper's code
     assert (paper.cost_width, paper.fine_cost_width, paper.limit_cost) == (1.0, 0.0, 0.0)
+    assert (paper.horizon, paper.max_action) == (50, 0.1)  # the healthy script's
     healthy = reacher.parse_args([])
     assert healthy.preset is None
     assert reacher.env_kwargs(healthy, False)["joint_state"] == "measured"

@@ -149,15 +149,21 @@ def test_the_schedule_widens_the_main_cost_and_start_variance_early_only():
     np.testing.assert_array_equal(plain.S_init, before[1])
 
 
-def test_only_the_healthy_reacher_widens_its_first_learned_start_by_default():
+def test_the_reacher_arms_widen_their_first_learned_start_by_default():
     from pilco.tasks import adaptation
 
     healthy = reacher.parse_args([])
     assert (healthy.early_start_var, healthy.early_cost_width, healthy.early_episodes) == (
         0.1, 0.0, 1)
     assert healthy.policy_init_var == 0.1
-    for other in (reacher.parse_args([], damaged=True), adaptation.parse_args([]),
-                  reacher.parse_args(["--preset", "paper-code"])):
+    # the damaged arm (the elbow stuck in the healthy start pose) has the healthy defaults
+    damaged = reacher.parse_args([], damaged=True)
+    for key, value in vars(healthy).items():
+        if key != "output":
+            assert getattr(damaged, key) == value, key
+    assert damaged.damage_mode == "stuck"
+    for other in (adaptation.parse_args([]), reacher.parse_args(["--preset", "paper-code"]),
+                  reacher.parse_args(["--preset", "paper-code"], damaged=True)):
         assert (other.early_start_var, other.policy_init_var) == (0.0, 0.0)
     agent = tiny_agent([])
     hook = reacher.schedule(healthy)
@@ -375,6 +381,42 @@ def test_a_resumed_paper_run_gets_its_priors_back(tmp_path):
     x = first.episodes[-1].states[-1]  # read from agent.npz, not rebuilt: the same policy
     np.testing.assert_allclose(resumed.agent.compute_action(x), first.agent.compute_action(x))
     assert priors_of(resumed.agent) == [((1.0, 10.0), (1.5, 2.0))] * 10
+
+
+@pytest.mark.parametrize("mode", ["stuck", "straight"])
+def test_a_resumed_damaged_run_keeps_its_damage_mode(mode, tmp_path):
+    """The damage mode is saved with the run's settings; a resumed run's env has it."""
+    tiny = ["--horizon", "4", "--planning-horizon", "3", "--basis-functions", "2",
+            "--policy-iters", "1", "--model-iters", "2", "--quiet", "--no-render",
+            "--no-figures", "--output", str(tmp_path)]
+    first = reacher.make_experiment(
+        reacher.parse_args([*tiny, "--episodes", "2", "--damage-mode", mode], damaged=True),
+        "damaged_reacher", damaged=True)
+    first.run()
+    elbow = first.episodes[-1].states[:, 3 + 3]
+    np.testing.assert_allclose(elbow, 2.0 if mode == "stuck" else 0.0)
+    args = reacher.parse_args([*tiny, "--episodes", "3", "--resume", str(tmp_path)],
+                              damaged=True)
+    assert args.damage_mode == mode
+    resumed = reacher.make_experiment(args, "damaged_reacher", damaged=True)
+    assert resumed.make_env().unwrapped.damage_mode == mode
+    resumed.run()
+    assert len(resumed.episodes) == 3
+    np.testing.assert_allclose(resumed.episodes[-1].states[:, 3 + 3], elbow[0])
+
+
+def test_a_run_saved_with_the_straight_arms_earlier_name_resumes(tmp_path):
+    import json
+
+    saved = vars(reacher.parse_args(["--output", str(tmp_path)], damaged=True))
+    saved["damage_mode"] = "zero"  # the straightened arm's earlier name
+    (tmp_path / "progress.json").write_text(json.dumps({"args": saved}))
+    args = reacher.parse_args(["--resume", str(tmp_path)], damaged=True)
+    kw = reacher.env_kwargs(args, damaged=True)
+    from pilco.envs import FetchJointReacher
+
+    assert FetchJointReacher(damaged_joints=kw["damaged_joints"],
+                             damage_mode=kw["damage_mode"]).damage_mode == "straight"
 
 
 def test_a_drawn_target_comes_from_the_seed_and_stays_in_its_cube():

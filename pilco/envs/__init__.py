@@ -4,16 +4,17 @@ Importing this package registers (once; importing again is harmless):
 
 - ``pilco/CartPoleSwingUp-v0``: :class:`CartPoleSwingUp`, 40 steps of 0.1 s.
 - ``pilco/FetchJointReacher-v0``: :class:`FetchJointReacher`, healthy arm, 50 steps.
-- ``pilco/FetchJointReacherDamaged-v0``: the same with the elbow forced to 0 rad
-  (``damaged_joints=("elbow_flex",)``, ``damage_mode="zero"``).
+- ``pilco/FetchJointReacherDamaged-v0``: the same with the elbow's motor unresponsive,
+  the joint stuck at its start angle (``damaged_joints=("elbow_flex",)``,
+  ``damage_mode="stuck"``, the paper's damage).
 - ``pilco/PendulumSwingUp-v0``: :class:`PendulumSwingUp`, gymnasium's Pendulum-v1 from
   hanging down with each action held for 3 of its steps, 40 steps.
 
 Constructor arguments pass through ``gymnasium.make``; e.g. the arm of the paper's
-published scripts (commanded joint angles in the state, elbow healthy at reset and
-0 rad from the first step on)::
+published scripts (commanded joint angles in the state: the running sum of the actions,
+which keeps growing for the stuck elbow) with the damaged script's larger steps::
 
-    gymnasium.make(FETCH_DAMAGED_ID, joint_state="commanded", damage_mode="zero_on_step")
+    gymnasium.make(FETCH_DAMAGED_ID, joint_state="commanded", max_action=0.3)
 
 The episode horizon of the registered ids is enforced by gymnasium's ``TimeLimit``
 wrapper (``env.spec.max_episode_steps``; override with
@@ -63,7 +64,7 @@ _SPECS = (
         FETCH_DAMAGED_ID,
         "pilco.envs.fetch_reacher:FetchJointReacher",
         50,
-        {"damaged_joints": ("elbow_flex",), "damage_mode": "zero"},
+        {"damaged_joints": ("elbow_flex",), "damage_mode": "stuck"},
     ),
     (PENDULUM_ID, "pilco.envs.pendulum:PendulumSwingUp", 40, {}),
 )

@@ -3,13 +3,15 @@
 Modes (the agent is not told; the observation keeps its form, unless the env is wrapped
 in :class:`DamageFlag`):
 
-- ``"zero"``: the joints are forced to 0 rad at reset and at every step whatever the
-  command;
-- ``"zero_on_step"`` (the published scripts' unresponsive arm): the reset leaves the joints
-  at the start pose, and every step forces them to 0 rad, so the first transition jumps
-  from the healthy pose to the straightened joint;
-- ``"stuck"``: the joints keep the angle they had when the damage happened (the start
-  pose of each episode, or the current angle when damaged mid-run).
+- ``"stuck"`` (the paper's unresponsive motor): the joints ignore every command and keep
+  the angle they had when they broke: the start pose of each episode for an arm damaged
+  from the start, the current angle for an arm damaged mid-run;
+- ``"straight"``: a harder variant, the joints are forced to 0 rad at reset and at every
+  step whatever the command (for the Fetch elbow a straightened arm, which starts about
+  1.2 m from the paper's target and needs at least 13 steps of 0.1 rad to reach it, see
+  :func:`pilco.envs.fewest_steps`).
+
+``"zero"``, this mode's earlier name, is still accepted (runs saved with it resume).
 """
 from __future__ import annotations
 
@@ -21,9 +23,24 @@ import numpy as np
 from pilco.envs import _checks as check
 from pilco.envs.fetch_model import SHORT_NAMES, resolve_joints
 
-__all__ = ["DAMAGE_MODES", "JointDamage", "DamageFlag"]
+__all__ = ["DAMAGE_MODES", "JointDamage", "DamageFlag", "damage_mode"]
 
-DAMAGE_MODES = ("zero", "zero_on_step", "stuck")
+DAMAGE_MODES = ("stuck", "straight")
+
+#: earlier names of the modes, still accepted
+_ALIASES = {"zero": "straight"}
+
+
+def damage_mode(mode: Any) -> str:
+    """``mode`` checked against :data:`DAMAGE_MODES` (earlier names mapped to today's);
+    TypeError for a non-string, ValueError for an unknown mode."""
+    if isinstance(mode, str) and mode in _ALIASES:
+        return _ALIASES[mode]
+    if mode == "zero_on_step":
+        raise ValueError("damage_mode 'zero_on_step' was removed: the paper's final script "
+                         "keeps the joint stuck at its start angle ('stuck'); 'straight' "
+                         "forces it to 0 rad from the reset on")
+    return check.choice(mode, "damage_mode", DAMAGE_MODES)
 
 
 class JointDamage:
@@ -34,9 +51,9 @@ class JointDamage:
         mode: one of :data:`DAMAGE_MODES`.
     """
 
-    def __init__(self, joints: Any = (), mode: str = "zero") -> None:
+    def __init__(self, joints: Any = (), mode: str = "stuck") -> None:
         self.joints: tuple[int, ...] = ()
-        self.mode = "zero"
+        self.mode = "stuck"
         self._stuck = np.zeros(0)
         self.replace(joints, mode, np.zeros(len(SHORT_NAMES)))
 
@@ -49,7 +66,7 @@ class JointDamage:
         """Damage ``joints`` instead of the previous ones; ``"stuck"`` joints hold their
         angles in ``current`` (7,)."""
         damaged = resolve_joints(joints)
-        self.mode = check.choice(mode, "damage_mode", DAMAGE_MODES)
+        self.mode = damage_mode(mode)
         self.joints = damaged
         self._stuck = current[list(damaged)] if damaged else np.zeros(0)
 
@@ -68,8 +85,6 @@ class JointDamage:
         """Angles ``q`` (7,) of a new episode's start pose after the damage (in place)."""
         if self.mode == "stuck" and self.joints:
             self._stuck = q[list(self.joints)].copy()
-        if self.mode == "zero_on_step":
-            return q
         return self._force(q)
 
     def at_step(self, q: np.ndarray) -> np.ndarray:

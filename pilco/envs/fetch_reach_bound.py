@@ -5,9 +5,8 @@ target in ``k`` steps ends in a pose ``q`` with ``max_j |q_j - start_j| <= k * m
 and the gripper within the success distance. The fewest steps are therefore
 ``ceil(min over reaching poses of max_j |q_j - start_j| / max_action)``, and the straight
 line in joint space from the start to that pose, cut into equal steps, achieves it (the
-env is kinematic: no dynamics, no collisions). Damaged joints cannot move: they hold 0 rad
-(``"zero"``, ``"zero_on_step"``: the first step straightens them) or their start angle
-(``"stuck"``).
+env is kinematic: no dynamics, no collisions). Damaged joints cannot move: they hold their
+start angle (``"stuck"``) or 0 rad (``"straight"``).
 
 The minimum over poses is found by sequential quadratic programming (SLSQP) from many
 random starting poses, so the returned pose is the best local optimum found: with the

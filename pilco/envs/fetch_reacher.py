@@ -74,10 +74,9 @@ class FetchJointReacher(gymnasium.Env):
     "ee_position", "qpos"}`` (``qpos``: the arm's actual angles).
 
     Damage (the agent is not told; it persists across resets until :meth:`repair`):
-    ``damaged_joints`` with ``damage_mode`` ``"zero"`` (0 rad at reset and every step),
-    ``"zero_on_step"`` (the published scripts' arm: healthy start pose, 0 rad from the
-    first step on) or ``"stuck"`` (held where the damage found it); see
-    :mod:`pilco.envs.fetch_damage`.
+    ``damaged_joints`` with ``damage_mode`` ``"stuck"`` (the paper's: they ignore commands
+    and hold the angle where the damage found them, the start pose at each reset) or
+    ``"straight"`` (0 rad at reset and every step); see :mod:`pilco.envs.fetch_damage`.
 
     Args:
         render_mode: ``None`` or ``"rgb_array"`` (offscreen ``mujoco.Renderer``).
@@ -89,7 +88,7 @@ class FetchJointReacher(gymnasium.Env):
         distance_threshold: success radius [m].
         max_episode_steps: horizon (default 50) or ``None``.
         damaged_joints: names of damaged joints (default none).
-        damage_mode: ``"zero"``, ``"zero_on_step"`` or ``"stuck"``.
+        damage_mode: ``"stuck"`` or ``"straight"``.
         joint_state: ``"measured"`` or ``"commanded"`` joint angles in the observation.
         fixed_qpos: overrides of :data:`DEFAULT_FIXED_QPOS` (base slides, torso, head,
             fingers), ``{joint name: value}``.
@@ -111,7 +110,7 @@ class FetchJointReacher(gymnasium.Env):
         distance_threshold: float = 0.05,
         max_episode_steps: int | None = 50,
         damaged_joints: Any = (),
-        damage_mode: str = "zero",
+        damage_mode: str = "stuck",
         joint_state: str = "measured",
         fixed_qpos: Mapping[str, float] | None = None,
         model_path: str | None = None,
@@ -205,7 +204,7 @@ class FetchJointReacher(gymnasium.Env):
 
     @property
     def damage_mode(self) -> str:
-        """``"zero"``, ``"zero_on_step"`` or ``"stuck"``."""
+        """``"stuck"`` or ``"straight"``."""
         return self._damage.mode
 
     def forward_kinematics(self, qpos: Any) -> np.ndarray:
@@ -218,10 +217,10 @@ class FetchJointReacher(gymnasium.Env):
         return float(np.linalg.norm(self.ee_position - self._arm.target))
 
     # ----------------------------------------------------------------- damage
-    def damage(self, joints: Any = ("elbow_flex",), mode: str = "zero") -> None:
+    def damage(self, joints: Any = ("elbow_flex",), mode: str = "stuck") -> None:
         """Damage ``joints`` (name or names, short or full) of a running env, replacing
-        any previous damage. ``mode`` ``"zero"`` / ``"zero_on_step"``: forced to 0 rad from
-        the next step on (they differ at later resets); ``"stuck"``: held where they are.
+        any previous damage. ``mode`` ``"stuck"``: held where they are now (and at the
+        start pose after a reset); ``"straight"``: forced to 0 rad from the next step on.
         """
         self._damage.replace(joints, mode, self.qpos)
         logger.info("Damaged Fetch joints %s (mode %s)", self.damaged_joints, mode)

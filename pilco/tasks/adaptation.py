@@ -6,7 +6,7 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
    ``--min-healthy-episodes`` were run;
 2. :func:`damage`: ``env.damage(--damaged-joints, --damage-mode)`` (the agent is not
    told unless ``--damage-input``; by default the elbow is stuck at its angle,
-   ``--damage-mode zero`` straightens it); the damaged arm's start state becomes the
+   ``--damage-mode straight`` straightens it); the damaged arm's start state becomes the
    agent's ``m_init``;
 3. up to ``--damaged-episodes`` learned episodes with the same agent, policy and data
    (``--drop-old-data``: the model then learns from the damaged episodes only;
@@ -89,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.set_defaults(policy_min_rel_improvement=None, policy_patience=10)
     parser.description = "PILCO on the Fetch reacher, adapting to a joint damaged mid-run"
     # the elbow breaks where it is (stuck at its start angle), so the arm starts where the
-    # healthy one did and the healthy cost width still applies; --damage-mode zero
+    # healthy one did and the healthy cost width still applies; --damage-mode straight
     # straightens it (1.17 m from the target: add --cost-width 0.4 then)
     parser.set_defaults(output="runs/adaptation-seed{seed}", episodes=None,
                         damage_mode="stuck")

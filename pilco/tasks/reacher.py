@@ -1,59 +1,59 @@
 """The paper's 7-DoF Fetch joint-space reacher (paper §4, §5.1) and its damaged arm
 (§5.2) as tasks.
 
-Defaults are the paper's: 4 episodes of at most 50 steps (1 random with actions uniform
-in ±0.05 rad, then 3 learned), an RBF policy of 50 basis functions with sine squashing
-to ±0.1 rad, 10 independent dynamics GPs, an episode stops once the gripper is within
-5 cm of the target. "Success": the last episode reaches the target within 15 steps.
+Defaults are the paper's where it states them: 4 episodes of at most 50 steps (1 random
+with actions uniform in ±0.05 rad, then 3 learned), an RBF policy of 50 basis functions
+with sine squashing to ±0.1 rad, 10 independent dynamics GPs, an episode stops once the
+gripper is within 5 cm of the target. "Success": the last episode reaches the target
+within 15 steps.
+
+The damaged arm is the paper's: the elbow's motor is unresponsive, the joint ignores
+every command and stays at its start angle (``--damage-mode stuck``); the policy is not
+told. ``--damage-mode straight`` forces the elbow to 0 rad instead, a harder variant
+whose arm starts about 1.2 m from the target. Both arms share every default below.
 
 One default differs from the paper: the GPs learn from every transition (at most 200 in
 4 episodes), where the paper kept only the first 2T = 100 (``--max-data 100`` restores
 that). With the cap the model never sees the last two episodes, so it knows nothing of
 the region near the target unless episode 2 already got there.
 
-Settings the paper leaves open (chosen here, every one a flag):
+Settings the paper leaves open (chosen here, every one a flag; the measurements behind
+them are in ``docs/success-rates.md``):
 
-- ``--cost-width`` σ_c = 0.2 m (damaged arm: 0.4 m, it starts ~1.1 m away where a 0.2 m
-  cost is flat) of the saturating cost ``1 - exp(-d² / (2 σ_c²))`` on the gripper
-  position (``ExponentialReward`` with ``W = diag(1/σ_c², 1/σ_c², 1/σ_c², 0...)``);
-  ``--fine-cost-width`` 0.05 m (healthy arm; damaged: none) adds a narrow second cost
-  (``CombinedRewards``): the reacher's failures were mostly close misses and stalls, and
-  with it seeds 0-19 succeed 14/20 instead of 11/20 (README, "Success rates").
+- ``--cost-width`` σ_c = 0.2 m of the saturating cost ``1 - exp(-d² / (2 σ_c²))`` on the
+  gripper position (``ExponentialReward`` with ``W = diag(1/σ_c², 1/σ_c², 1/σ_c², 0...)``),
+  plus ``--fine-cost-width`` 0.05 m, a narrow second cost (``CombinedRewards``) that
+  rewards precision near the target, where the failures were close misses and stalls.
 - ``--limit-cost`` 0.1 rad: saturating bumps of this width at the joint limits are
   subtracted from the reward (weight ``--limit-cost-weight`` 0.5 each), so that the
   policy keeps the predicted joints off their limits, where the real joint stops but
-  the model, which has rarely seen it there, predicts it moving on (the diagnosis of
-  the failed seeds found joints at their limits in most stalls). Seeds 0-19 of the
-  healthy reacher: see the README's "Success rates". ``0`` turns it off (the
-  adaptation task's default: with it seeds 0-3 recovered 0 of 4 times).
+  the model, which has rarely seen it there, predicts it moving on. ``0`` turns it off.
 - ``--start-var`` 1e-4: the initial state distribution is N(start observation, 1e-4·I);
   in the first learned episode (``--early-episodes`` 1) it is ``--early-start-var`` 0.1·I
-  (healthy arm; the paper code's ``S_init`` for that episode only; damaged arm: 0, no
-  schedule): a policy optimised for a wide start distribution brings the arm near the
-  target earlier (README, "Success rates"). ``--early-cost-width`` likewise widens the
-  main cost in those episodes (off by default: no gain measured).
-- ``--policy-init-var`` 0.1 (healthy arm; damaged arm, adaptation, paper-code preset:
-  0): the initial policy's 50 RBF centres are drawn from N(start observation, 0.1·I),
-  targets from N(0, 0.1²), as the MATLAB release initialises its policies
-  (:func:`init_policy_near`); 0 draws the centres from N(0, I), which puts most of them
-  far from the arm's states (its joint angles start at -1 and 2 rad). Seeds 0-19: 20/20
-  with it, 17/20 without (README).
+  (the paper code's ``S_init``, for that episode only): a policy optimised for a wide
+  start distribution brings the arm near the target sooner, and the episodes after it
+  give the model data there. ``--early-cost-width`` likewise widens the main cost in
+  those episodes (off by default).
+- ``--policy-init-var`` 0.1: the initial policy's 50 RBF centres are drawn from
+  N(start observation, 0.1·I), targets from N(0, 0.1²), as the MATLAB release
+  initialises its policies (:func:`init_policy_near`); 0 draws the centres from
+  N(0, I), which puts most of them far from the arm's states (its joint angles start at
+  -1 and 2 rad).
 - ``--policy-iters`` 25 and ``--model-iters`` 100 L-BFGS iterations, 1 restart each; a
-  policy search of the healthy arm stops once its predicted return grew by less than 1 %
-  over 5 iterations (``--policy-min-rel-improvement`` 0.01, ``--policy-patience`` 5; 0
-  turns it off; the damaged arm runs without it): seeds 0-19 succeed 20/20 with and without
-  it, in 34 instead of 46 s per run median; the last episode reaches the target in 5.5
-  instead of 4 steps median (README, "Success rates").
-- GP-input columns that are constant in the data (a damaged joint) get a long lengthscale
-  after every model fit (:func:`ignore_constant_inputs`).
+  policy search stops once its predicted return grew by less than 1 % over 5 iterations
+  (``--policy-min-rel-improvement`` 0.01, ``--policy-patience`` 5; 0 turns it off):
+  the later iterations polish a policy that already reaches.
+- GP-input columns that are constant in the data (a damaged joint's measured angle) get
+  a long lengthscale after every model fit (:func:`ignore_constant_inputs`).
 - ``--gp-priors none``: maximum evidence; ``paper`` puts the paper code's Gamma priors
   on the GPs' lengthscales and signal variances (:data:`PAPER_GP_PRIORS`).
 
 ``--preset paper-code`` starts from the published scripts' settings
 (:data:`PAPER_CODE`: planning horizon 100, ``S_init = 0.1 I``, one cost of width 1 m,
 30 policy iterations (60 the first time, no early stop), the first 100 transitions,
-commanded joint angles in the state, the GP priors; the damaged arm straightens on the
-first step).
+commanded joint angles in the state, the GP priors); the damaged arm's script also
+kept the elbow stuck and ran episodes of 25 steps of up to 0.3 rad
+(:data:`PAPER_CODE_DAMAGED`).
 
 ``--target-spread S`` draws the target uniformly in the cube of half-width ``S`` [m]
 around ``--target`` (default the env's (1.2, 0.38, 0.38)) from the run's seed
@@ -70,6 +70,7 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from ..envs.fetch_damage import DAMAGE_MODES
 from ..experiment import Experiment, ExperimentConfig, make_env
 from ..experiment.cli import (add_common_arguments, add_preset_argument, finish,
                               learning_settings, non_negative_float, open_experiment,
@@ -79,7 +80,8 @@ __all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
            "ignore_constant_inputs", "limit_bumps", "set_gp_priors", "make_experiment", "figures",
            "reached_within", "parse_args", "main", "SUCCESS_STEPS", "position_weights",
            "draw_target", "check_drawn_target",
-           "main_position_reward", "schedule", "init_policy_near", "ADDED_LATER"]
+           "main_position_reward", "schedule", "init_policy_near", "ADDED_LATER",
+           "PAPER_CODE", "PAPER_CODE_DAMAGED"]
 
 
 #: Paper figures of the reacher (its own machine, with a GPU).
@@ -91,6 +93,10 @@ PAPER_CODE = dict(planning_horizon=100, start_var=0.1, cost_width=1.0, fine_cost
                   limit_cost=0.0, policy_iters=30, policy_iters_first=60, max_data=100,
                   joint_state="commanded", gp_priors="paper", early_start_var=0.0,
                   policy_init_var=0.0, policy_min_rel_improvement=0.0)
+
+#: What the published damaged-arm script changed on top of :data:`PAPER_CODE`: the elbow
+#: stuck at its start angle, episodes of 25 steps, steps of up to 0.3 rad.
+PAPER_CODE_DAMAGED = dict(damage_mode="stuck", horizon=25, max_action=0.3)
 
 #: The paper code's priors on every dynamics GP's hyperparameters (GPflow 1's Gamma(shape,
 #: scale)): lengthscales ~ Gamma(1, 10), signal variance ~ Gamma(1.5, 2); training is then
@@ -115,7 +121,9 @@ SUCCESS_STEPS = 15
 
 
 def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
-    """Every flag of the (damaged) reacher task."""
+    """Every flag of the (damaged) reacher task. The damaged arm has the healthy arm's
+    defaults: with the paper's damage (the elbow stuck at its start angle) it starts in
+    the same pose and reaches with the other six joints."""
     name = "damaged-reacher" if damaged else "reacher"
     parser = argparse.ArgumentParser(
         description=("PILCO on the Fetch joint-space reacher"
@@ -123,16 +131,13 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     add_common_arguments(parser, episodes=4, steps=50, basis_functions=50, policy_iters=25,
                          model_iters=100, policy_restarts=1, model_restarts=1, max_data=None,
-                         policy_min_rel_improvement=None if damaged else 0.01,
-                         policy_patience=10 if damaged else 5,
+                         policy_min_rel_improvement=0.01, policy_patience=5,
                          output=f"runs/{name}-seed{{seed}}")
-    presets = {"paper-code": dict(PAPER_CODE, **({"damage_mode": "zero_on_step"}
-                                                 if damaged else {}))}
+    presets = {"paper-code": dict(PAPER_CODE, **(PAPER_CODE_DAMAGED if damaged else {}))}
     g = parser.add_argument_group("reacher")
-    g.add_argument("--cost-width", type=positive_float, default=0.4 if damaged else 0.2,
+    g.add_argument("--cost-width", type=positive_float, default=0.2,
                    help="σ_c [m] of the saturating cost on the gripper-target distance")
-    g.add_argument("--fine-cost-width", type=non_negative_float,
-                   default=None if damaged else 0.05,
+    g.add_argument("--fine-cost-width", type=non_negative_float, default=0.05,
                    help="add a second, narrow saturating cost of this width [m] (more "
                         "precision near the target; 0: none)")
     g.add_argument("--limit-cost", type=non_negative_float, default=0.1, metavar="WIDTH",
@@ -144,14 +149,12 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
     g.add_argument("--early-cost-width", type=non_negative_float, default=0.0,
                    help="width [m] of the main cost in the first --early-episodes learned "
                         "episodes (then --cost-width again; 0: no schedule)")
-    g.add_argument("--early-start-var", type=non_negative_float,
-                   default=0.0 if damaged else 0.1,
+    g.add_argument("--early-start-var", type=non_negative_float, default=0.1,
                    help="variance of the initial state distribution in the first "
                         "--early-episodes learned episodes (then --start-var; 0: no schedule)")
     g.add_argument("--early-episodes", type=positive_int, default=1,
                    help="learned episodes that use --early-cost-width / --early-start-var")
-    g.add_argument("--policy-init-var", type=non_negative_float,
-                   default=0.0 if damaged else 0.1,
+    g.add_argument("--policy-init-var", type=non_negative_float, default=0.1,
                    help="draw the initial policy's RBF centres from N(start observation, "
                         "this·I), as the MATLAB release does (0: from N(0, I))")
     g.add_argument("--gp-priors", choices=("none", "paper"), default="none",
@@ -176,10 +179,11 @@ def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
                         "the default target) from the run's seed; 0: no draw")
     g.add_argument("--start-noise", type=non_negative_float, default=0.0,
                    help="std [rad] of noise on the start joint angles")
-    g.add_argument("--damage-mode", choices=("zero", "zero_on_step", "stuck"), default="zero",
-                   help="damaged arm: elbow forced to 0 rad ('zero'; 'zero_on_step': the "
-                        "arm starts healthy and straightens on the first step, as the "
-                        "paper's code) or stuck")
+    g.add_argument("--damage-mode", choices=DAMAGE_MODES, default="stuck",
+                   help="damaged arm: the joints ignore commands and stay at their start "
+                        "angle ('stuck', the paper's damage) or are forced to 0 rad "
+                        "('straight': the elbow straightened, a harder variant that needs "
+                        "at least 13 steps to the paper's target)")
     g.add_argument("--joint-state", choices=("measured", "commanded"), default="measured",
                    help="the state's joint angles: measured, or commanded (the running sum "
                         "of the actions, as the paper's code)")
