@@ -407,8 +407,8 @@ def count_label(counts: Mapping[str, int]) -> str:
     if len(counts) == 1:
         value = next(iter(counts))
         return "not recorded" if value == "unknown" else _cell(value)
-    return ", ".join(f"{'not recorded' if k == 'unknown' else _cell(k)} ({n} runs)"
-                     for k, n in sorted(counts.items()))
+    return ", ".join(f"{'not recorded' if k == 'unknown' else _cell(k)} "
+                     f"({n} run{'' if n == 1 else 's'})" for k, n in sorted(counts.items()))
 
 
 def result_text(aggregate: Mapping[str, Any]) -> str:
