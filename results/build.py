@@ -10,8 +10,8 @@ has finished, ``sweep.json``. A file holds
 
 * ``format`` (:data:`FORMAT`), ``task``, ``command`` (the sweep's command line from
   ``sweep.json``, its output directory written ``DIR``; ``null`` before ``sweep.json``
-  exists), ``seeds`` (the seeds asked for, from ``sweep.json``; ``null`` without it) and
-  ``failed`` (``{setting: [seed, ...]}``: runs ``sweep.json`` records as failed that have
+  exists), ``seeds`` (the seeds asked for, from ``sweep.json``; without it the seeds of
+  the ``seed-S`` directories, which a sweep makes for every run it plans) and ``failed`` (``{setting: [seed, ...]}``: runs ``sweep.json`` records as failed that have
   no finished summary);
 * ``runs``: one entry per finished run, by setting and seed: ``setting``, ``seed``,
   ``success``, ``solved``, ``solved_at_episode``, ``seconds`` (the run's total),
@@ -221,13 +221,14 @@ def export_sweep(sweep_dir) -> Optional[Dict[str, Any]]:
     sweep_dir = os.fspath(sweep_dir)
     if not os.path.isdir(sweep_dir):
         raise ValueError(f"{sweep_dir}: not a directory")
-    runs, first_task = [], None
+    runs, first_task, seen = [], None, set()
     for setting in sorted(os.listdir(sweep_dir)):
         setting_dir = os.path.join(sweep_dir, setting)
         if not os.path.isdir(setting_dir):
             continue
         seeds = sorted((s, name) for name in os.listdir(setting_dir)
                        if (s := _seed_of(name)) is not None)
+        seen.update(s for s, _ in seeds)
         for _, name in seeds:
             summary = finished_summary(os.path.join(setting_dir, name))
             if summary is not None:
@@ -247,7 +248,7 @@ def export_sweep(sweep_dir) -> Optional[Dict[str, Any]]:
         "format": FORMAT,
         "task": task,
         "command": portable_command(report["command"]) if report.get("command") else None,
-        "seeds": report.get("seeds"),
+        "seeds": report.get("seeds") or sorted(seen),
         "failed": failed,
     }
     data["settings"] = aggregates({**data, "runs": runs})

@@ -172,8 +172,10 @@ def test_export_round_trips_and_a_hand_edit_is_caught(sweep, tmp_path):
 def test_export_without_sweep_json_or_finished_runs(sweep, tmp_path):
     (sweep / "sweep.json").unlink()
     data = build.export_sweep(sweep)
-    assert data["command"] is None and data["seeds"] is None and data["failed"] == {}
-    assert data["settings"]["default"]["runs"] == 2            # only what it can see
+    assert data["command"] is None and data["failed"] == {}
+    assert data["seeds"] == [0, 1, 2, 3, 4]                    # the seed-S directories
+    aggregate = data["settings"]["default"]
+    assert (aggregate["runs"], aggregate["finished"], aggregate["not_run"]) == (5, 2, 3)
     empty = tmp_path / "empty" / "default" / "seed-0"
     empty.mkdir(parents=True)
     assert build.export_sweep(tmp_path / "empty") is None
