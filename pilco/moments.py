@@ -66,9 +66,9 @@ def pair_groups(P: int, E: int, groups: Optional[int] = None) -> List[Tuple[int,
     :func:`symmetric_pairs` for E outputs, the first one holding the E diagonal pairs.
 
     Each group's share of the pair block is an independent part of the compiled graph, so
-    TensorFlow runs the groups side by side on its inter-op threads: on 2 cores with one
-    intra-op thread, 2 groups took the reacher's objective + gradient from 0.42 to 0.31 s
-    (one group's operations, split by their batch, cannot use the second core as well).
+    TensorFlow runs the groups side by side on its inter-op threads: one group's batched
+    operations, split over threads, leave the other cores partly idle at these sizes,
+    while independent groups keep every core busy (timings: docs/performance.md).
     ``groups`` defaults to the inter-op threads (at most :data:`MAX_PAIR_GROUPS`, at
     least 1); with one thread a single group (the unsplit block) is used.
     """

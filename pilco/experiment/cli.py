@@ -202,9 +202,9 @@ def configure_threads() -> None:
     """One TensorFlow intra-op thread unless ``TF_NUM_INTRAOP_THREADS`` says otherwise (the
     inter-op pool keeps its default, every CPU): the policy objective's groups of output
     pairs (:func:`pilco.moments.pair_groups`) then run side by side, one per CPU, which
-    measured faster than TensorFlow's default of splitting each operation over the CPUs
-    (the reacher, seed 0, on 2 cores: 36.5 against 43.0 s; README, Performance). Takes
-    effect in a process that has not run a TensorFlow operation yet, as a task's does."""
+    keeps the CPUs busier than TensorFlow's default of splitting each of these small
+    batched operations over them (timings: docs/performance.md). Takes effect in a
+    process that has not run a TensorFlow operation yet, as a task's does."""
     os.environ.setdefault("TF_NUM_INTRAOP_THREADS", "1")
 
 

@@ -1,0 +1,310 @@
+"""The committed results and what is generated from them (``results/build.py``).
+
+The README's success table must be what ``python results/build.py render`` makes of
+``results/*.json`` and ``results/table.json``; rows without committed data must be
+marked manual. The exporter and the table are checked on small synthetic sweeps.
+"""
+from __future__ import annotations
+
+import copy
+import importlib.util
+import json
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _load_build():
+    spec = importlib.util.spec_from_file_location("_pilco_results_build",
+                                                  ROOT / "results" / "build.py")
+    module = importlib.util.module_from_spec(spec)
+    dont_write = sys.dont_write_bytecode
+    sys.dont_write_bytecode = True      # no __pycache__ in results/
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        sys.dont_write_bytecode = dont_write
+    return module
+
+
+build = _load_build()
+
+
+# ------------------------------------------------------------------ the committed data
+def test_readme_table_is_the_one_the_committed_data_gives():
+    text = build.README.read_text(encoding="utf-8")
+    start, end = build.readme_block(text)
+    expected = build.render_table(build.load_table(), build.load_exports())
+    assert text[start:end] == expected, (
+        "README.md's success table differs from results/*.json and results/table.json: "
+        f"run `{build.COMMAND}` and commit README.md")
+    assert build.with_table(text, expected) == text      # the marker line is current too
+
+
+def test_rows_without_committed_data_are_exactly_the_manual_ones():
+    rows = build.load_table()
+    exports = build.load_exports()
+    text = build.README.read_text(encoding="utf-8")
+    start, end = build.readme_block(text)
+    table_lines = [line for line in text[start:end].splitlines() if line.startswith("| ")]
+    assert len(table_lines) == 1 + len(rows)             # the header and one line per row
+    for row, line in zip(rows, table_lines[1:]):
+        assert line.startswith(f"| {row['label']} |")
+        if "manual" in row:
+            assert row["task"] not in exports
+            assert line.count(build.MANUAL_MARK) == 2       # the result and the per-run cell
+            assert f"{build.MANUAL_MARK} {row['label']}: typed into" in text[start:end]
+        else:
+            assert row["task"] in exports, f"no results/{row['task']}.json"
+            assert build.MANUAL_MARK not in line
+
+
+def test_committed_exports_are_small_and_named_by_task():
+    exports = build.load_exports()             # checks format, runs and their aggregates
+    assert exports
+    for task in exports:
+        assert (build.RESULTS_DIR / f"{task}.json").stat().st_size < build.MAX_BYTES
+
+
+# --------------------------------------------------------------- a synthetic sweep
+def _summary(seed, *, success, solved_at, total, cpu="AMD EPYC", dirty=False, onednn=None,
+             complete=True):
+    environment = {"TF_NUM_INTRAOP_THREADS": "1"}
+    if onednn is not None:
+        environment["TF_ENABLE_ONEDNN_OPTS"] = onednn
+    return {
+        "task": "reacher", "seed": seed, "complete": complete, "success": success,
+        "solved": solved_at is not None, "solved_at_episode": solved_at,
+        "seconds": {"model": 1.0, "policy": 2.0, "total": total},
+        "episodes": [
+            {"episode": 1, "random": True, "steps": 3, "min_distance": 0.412345678,
+             "final_distance": 0.5, "steps_to_target": None, "cost": 9.0},
+            {"episode": 2, "random": False, "steps": 2, "min_distance": 0.04,
+             "final_distance": 0.04, "steps_to_target": 2 if solved_at else None},
+        ],
+        "distances": [[0.5, 0.45, 0.412345678, 0.42], [0.5, 0.2, 0.04]],
+        "provenance": {"git": {"commit": "abcdef1234567890", "dirty": dirty}, "cpu": cpu,
+                       "python": "3.11.7", "environment": environment},
+    }
+
+
+def _write(path, data):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data), encoding="utf-8")
+
+
+@pytest.fixture
+def sweep(tmp_path):
+    """A sweep of seeds 0-4: 0 succeeded, 1 failed the task, 2 is still running, 3's
+    process failed, 4 was interrupted (its summary complete, its record not finished)."""
+    root = tmp_path / "sweep-reacher"
+    run = root / "default"
+    _write(run / "seed-0" / "summary.json", _summary(0, success=True, solved_at=2, total=100.04))
+    _write(run / "seed-0" / "sweep-run.json", {"status": "finished"})
+    _write(run / "seed-1" / "summary.json",
+           _summary(1, success=False, solved_at=None, total=300.0,
+                    cpu="Intel(R) Xeon(R) Processor", dirty=True, onednn="0"))
+    _write(run / "seed-2" / "summary.json", _summary(2, success=True, solved_at=2, total=1.0,
+                                                     complete=False))
+    _write(run / "seed-2" / "sweep-run.json", {"status": "running"})
+    _write(run / "seed-3" / "sweep-run.json", {"status": "failed"})
+    _write(run / "seed-4" / "summary.json", _summary(4, success=True, solved_at=2, total=1.0))
+    _write(run / "seed-4" / "sweep-run.json", {"status": "interrupted"})
+    (run / "seed-x").mkdir()
+    (run / "notes.txt").write_text("not a run\n")
+    _write(root / "sweep.json", {
+        "task": "reacher", "seeds": [0, 1, 2, 3, 4],
+        "command": ["python", "-m", "pilco.sweep", "reacher", "--seeds", "0-4",
+                    "--output", str(root), "--no-progress"],
+        "runs": [{"setting": "default", "seed": 0, "status": "finished"},
+                 {"setting": "default", "seed": 1, "status": "skipped"},
+                 {"setting": "default", "seed": 2, "status": "not_run"},
+                 {"setting": "default", "seed": 3, "status": "failed"},
+                 {"setting": "default", "seed": 4, "status": "not_run"}]})
+    return root
+
+
+def test_export_keeps_the_finished_runs_and_counts_the_others(sweep):
+    data = build.export_sweep(sweep)
+    assert data["format"] == build.FORMAT and data["task"] == "reacher"
+    assert data["command"] == ["python", "-m", "pilco.sweep", "reacher", "--seeds", "0-4",
+                               "--output", "DIR", "--no-progress"]
+    assert data["seeds"] == [0, 1, 2, 3, 4]
+    assert data["failed"] == {"default": [3]}
+    assert [(r["seed"], r["success"]) for r in data["runs"]] == [(0, True), (1, False)]
+    first = data["runs"][0]
+    assert first["seconds"] == 100.0
+    assert first["episodes"][0] == {"episode": 1, "random": True, "steps": 3,
+                                    "min_distance": 0.4123, "final_distance": 0.5,
+                                    "steps_to_target": None}
+    assert first["distances"][0] == [0.5, 0.45, 0.4123, 0.42]
+    assert first["provenance"] == {"git": {"commit": "abcdef1234567890", "dirty": False},
+                                   "cpu": "AMD EPYC"}
+    assert data["runs"][1]["provenance"]["environment"] == {"TF_ENABLE_ONEDNN_OPTS": "0"}
+    aggregate = data["settings"]["default"]
+    assert (aggregate["runs"], aggregate["finished"], aggregate["failed"],
+            aggregate["not_run"], aggregate["successes"]) == (5, 2, 1, 2, 1)
+    assert aggregate["seconds_per_run"] == {"median": 200.0, "max": 300.0}
+    assert aggregate["provenance"] == {
+        "commit": {"abcdef123456": 1, "abcdef123456-dirty": 1},
+        "cpu": {"AMD EPYC": 1, "Intel(R) Xeon(R) Processor": 1},
+        "onednn": {"default": 1, "0": 1}}
+
+
+def test_export_round_trips_and_a_hand_edit_is_caught(sweep, tmp_path):
+    out = tmp_path / "results"
+    out.mkdir()
+    assert build.export_main([str(sweep)], directory=out) == 0
+    path = out / "reacher.json"
+    assert build.load_export(path) == build.export_sweep(sweep)
+    assert build.load_exports(out) == {"reacher": build.export_sweep(sweep)}
+    edited = json.loads(path.read_text())
+    edited["runs"][1]["success"] = True
+    path.write_text(json.dumps(edited))
+    with pytest.raises(ValueError, match="not the aggregates of its 'runs'"):
+        build.load_export(path)
+
+
+def test_export_without_sweep_json_or_finished_runs(sweep, tmp_path):
+    (sweep / "sweep.json").unlink()
+    data = build.export_sweep(sweep)
+    assert data["command"] is None and data["failed"] == {}
+    assert data["seeds"] == [0, 1, 2, 3, 4]                    # the seed-S directories
+    aggregate = data["settings"]["default"]
+    assert (aggregate["runs"], aggregate["finished"], aggregate["not_run"]) == (5, 2, 3)
+    empty = tmp_path / "empty" / "default" / "seed-0"
+    empty.mkdir(parents=True)
+    assert build.export_sweep(tmp_path / "empty") is None
+    with pytest.raises(ValueError, match="not a directory"):
+        build.export_sweep(tmp_path / "missing")
+    assert build.portable_command(["x", "--output=/a/b"]) == ["x", "--output=DIR"]
+
+
+def test_old_and_broken_exports_are_refused(sweep, tmp_path):
+    data = build.export_sweep(sweep)
+    old = {k: v for k, v in data.items() if k not in ("format", "settings")}
+    with pytest.raises(ValueError, match="format None"):
+        build.check_export(old, "old.json")
+    broken = copy.deepcopy(data)
+    del broken["runs"][0]["seconds"]
+    with pytest.raises(ValueError, match=r"runs\[0\] lacks seconds"):
+        build.check_export(broken, "broken.json")
+    with pytest.raises(TypeError, match="JSON object"):
+        build.check_export([], "list.json")
+    (tmp_path / "other.json").write_text(json.dumps(data))
+    with pytest.raises(ValueError, match="holds task 'reacher'"):
+        build.load_exports(tmp_path)
+
+
+# ------------------------------------------------------------------------- the table
+ROW = {"task": "reacher", "label": "reacher (healthy arm)", "rule": "within 5 cm",
+       "goal": "≥ 19/20", "more": "more text"}
+
+
+def _export(successes, failures, *, cpus=("AMD EPYC",), seconds=(100.0, 200.0, 300.0)):
+    runs = []
+    for k in range(successes + failures):
+        summary = _summary(k, success=k < successes, solved_at=3 if k < successes else None,
+                           total=seconds[k % len(seconds)], cpu=cpus[k % len(cpus)])
+        runs.append(build.trim_run(summary, "default"))
+    data = {"format": build.FORMAT, "task": "reacher", "command": ["python", "-m", "x"],
+            "seeds": list(range(successes + failures)), "failed": {}, "runs": runs}
+    data["settings"] = build.aggregates(data)
+    return data
+
+
+def test_row_counts_medians_and_cpu_come_from_the_data():
+    cells = build.table_row(ROW, {"reacher": _export(2, 1)})
+    assert cells == ["reacher (healthy arm)", "within 5 cm", "0-2",
+                     "**2/3**, solved at episode 3 median", "more text", "200 s on AMD EPYC",
+                     "≥ 19/20"]
+
+
+def test_row_of_mixed_cpus_unsolved_runs_and_a_partial_sweep(sweep):
+    cells = build.table_row(ROW, {"reacher": build.export_sweep(sweep)})
+    assert cells[2] == "0-4"
+    assert cells[3] == "**1/2**, 1 of 2 never solved (1 failed, 2 not finished, not counted)"
+    assert cells[5] == "200 s on AMD EPYC (1 run), Intel(R) Xeon(R) Processor (1 run)"
+    nothing = build.table_row(ROW, {"reacher": _export(0, 2)})
+    assert nothing[3] == "**0/2**, none solved"
+
+
+def test_row_of_runs_without_provenance_says_so():
+    data = _export(1, 1)
+    for run in data["runs"]:
+        del run["provenance"]
+    data["settings"] = build.aggregates(data)
+    cells = build.table_row(ROW, {"reacher": data})
+    assert cells[5] == "150 s (CPU not recorded)"
+    line = build.source_line(ROW, data)
+    assert "commit not recorded" in line and "`TF_ENABLE_ONEDNN_OPTS`: not recorded" in line
+
+
+def test_manual_row_is_marked_and_a_missing_export_named(tmp_path):
+    manual = {**ROW, "task": "pendulum", "label": "pendulum",
+              "manual": {"seeds": "0-19", "result": "16/20", "per_run": "261 s",
+                         "note": "not exported"}}
+    table = build.render_table([ROW, manual], {"reacher": _export(2, 1)}, directory=tmp_path)
+    lines = table.splitlines()
+    assert lines[0].startswith("| experiment | success rule | seeds | result |")
+    assert lines[3] == ("| pendulum | within 5 cm | 0-19 | 16/20 † | more text | 261 s † "
+                        "| ≥ 19/20 |")
+    assert "† pendulum: typed into results/table.json, not computed from committed data: " \
+           "not exported" in table
+    assert "- reacher (healthy arm): `results/reacher.json`, `python -m x`" in table
+    with pytest.raises(ValueError, match="marked manual"):
+        build.table_row({**manual, "task": "reacher"}, {"reacher": _export(1, 0)})
+    with pytest.raises(FileNotFoundError, match="ghost.json: no such file"):
+        build.table_row({**ROW, "task": "ghost"}, {}, directory=tmp_path)
+    with pytest.raises(ValueError, match="no setting 'wide'"):
+        build.table_row({**ROW, "setting": "wide"}, {"reacher": _export(1, 0)})
+
+
+@pytest.mark.parametrize("rows, error, match", [
+    ([{**ROW, "colour": "red"}], ValueError, "unknown key"),
+    ([{k: v for k, v in ROW.items() if k != "goal"}], ValueError, "'goal' must be"),
+    ([ROW, ROW], ValueError, "has a row already"),
+    ([{**ROW, "manual": {"seeds": "0-19"}}], ValueError, "'manual' must have"),
+    ([{**ROW, "more": 3}], TypeError, "'more' must be a string"),
+    ([[]], TypeError, "not an object"),
+])
+def test_bad_table_rows_are_named(tmp_path, rows, error, match):
+    path = tmp_path / "table.json"
+    path.write_text(json.dumps({"rows": rows}), encoding="utf-8")
+    with pytest.raises(error, match=match):
+        build.load_table(path)
+
+
+def test_table_file_missing_or_malformed(tmp_path):
+    with pytest.raises(FileNotFoundError, match="table.json: no such file"):
+        build.load_table(tmp_path / "table.json")
+    (tmp_path / "table.json").write_text("[]")
+    with pytest.raises(TypeError, match="rows"):
+        build.load_table(tmp_path / "table.json")
+
+
+def test_with_table_replaces_only_the_marked_block():
+    text = f"# t\n\nabove\n{build.BEGIN_PREFIX} old -->\n| old |\n{build.END}\nbelow\n"
+    new = build.with_table(text, "| new |\n\n")
+    assert new == f"# t\n\nabove\n{build.BEGIN}\n| new |\n\n{build.END}\nbelow\n"
+    with pytest.raises(ValueError, match="one line starting"):
+        build.with_table("no markers\n", "| new |\n")
+    with pytest.raises(ValueError, match="one line starting"):
+        build.with_table(f"{build.END}\n{build.BEGIN}\n", "| new |\n")
+
+
+def test_seed_ranges():
+    assert build.seed_ranges([7, 0, 1, 2, 5, 8]) == "0-2, 5, 7-8"
+    assert build.seed_ranges([3]) == "3"
+    assert build.seed_ranges([]) == ""
+
+
+def test_figures_are_drawn_from_an_export(sweep, tmp_path):
+    drawn = build.draw_figures(build.export_sweep(sweep), directory=tmp_path)
+    assert [os.path.basename(p) for p in drawn] == ["reacher_success_rate.png",
+                                                    "reacher_distance_bands.png"]
+    assert all(Path(p).read_bytes().startswith(b"\x89PNG") for p in drawn)
