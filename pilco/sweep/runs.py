@@ -270,7 +270,14 @@ def execute_run(spec: RunSpec, threads: int = 1, resume_saved: bool = False
                                 preexec_fn=functools.partial(_die_with_parent, os.getpid())
                                 if sys.platform == "linux" else None)
         try:
-            returncode = proc.wait()
+            # waits of a second: Ray cancels a task by raising KeyboardInterrupt between
+            # two bytecodes, which never happens inside one long blocking wait
+            while True:
+                try:
+                    returncode = proc.wait(timeout=1.0)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
         except BaseException:
             _stop(proc)
             raise
@@ -343,6 +350,31 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
     outcome = SweepOutcome()
     pending: Dict[Any, RunSpec] = {}
 
+    def collect(ref, stopped: bool = False) -> None:
+        """Record the result of ``ref`` (a finished task) in its run's directory and in
+        ``outcome``; once ``stopped``, a failure is the interrupt's and raises instead.
+        The run leaves ``pending`` only when it is recorded."""
+        spec = pending[ref]
+        try:
+            result = ray.get(ref)
+        except (ray.exceptions.RayError, RunFailed) as err:
+            if stopped:
+                raise
+            failure = _failure(spec, err, max_retries + 1)
+            _record(spec, status="failed", **failure)
+            outcome.failed.append((spec, failure))
+            logger.warning("%s failed after %d attempt(s): %s", spec.name,
+                           failure["attempts"], failure["error"])
+        else:
+            summary = result["summary"]
+            write_json_atomic(os.path.join(spec.directory, SUMMARY), summary)
+            _record(spec, status="finished",
+                    **{k: v for k, v in result.items() if k != "summary"})
+            outcome.finished.append(spec)
+            if on_result is not None:
+                on_result(spec, summary)
+        del pending[ref]
+
     bar = tqdm(total=len(specs), unit="run", desc="sweep", file=sys.stderr,
                disable=not progress, dynamic_ncols=True)
     try:
@@ -363,23 +395,7 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
                 while pending:
                     done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
                     for ref in done:
-                        spec = pending.pop(ref)
-                        try:
-                            result = ray.get(ref)
-                        except (ray.exceptions.RayError, RunFailed) as err:
-                            failure = _failure(spec, err, max_retries + 1)
-                            _record(spec, status="failed", **failure)
-                            outcome.failed.append((spec, failure))
-                            logger.warning("%s failed after %d attempt(s): %s", spec.name,
-                                           failure["attempts"], failure["error"])
-                        else:
-                            summary = result["summary"]
-                            write_json_atomic(os.path.join(spec.directory, SUMMARY), summary)
-                            _record(spec, status="finished",
-                                    **{k: v for k, v in result.items() if k != "summary"})
-                            outcome.finished.append(spec)
-                            if on_result is not None:
-                                on_result(spec, summary)
+                        collect(ref)
                         bar.update(1)
             except KeyboardInterrupt:
                 outcome.interrupted = True
@@ -388,9 +404,14 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
                 for ref in pending:
                     with contextlib.suppress(Exception):
                         ray.cancel(ref, force=False)
-                # give running tasks a moment to stop their processes
+                # give running tasks a moment to stop their processes; a run that
+                # finishes meanwhile is kept as finished
                 with contextlib.suppress(Exception, KeyboardInterrupt):
-                    ray.wait(list(pending), num_returns=len(pending), timeout=10.0)
+                    done, _ = ray.wait(list(pending), num_returns=len(pending),
+                                       timeout=10.0)
+                    for ref in done:
+                        with contextlib.suppress(ray.exceptions.RayError, RunFailed):
+                            collect(ref, stopped=True)
                 outcome.not_run.extend(pending.values())
                 for spec in pending.values():
                     with contextlib.suppress(OSError):
