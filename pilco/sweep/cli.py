@@ -2,8 +2,15 @@
 Ray, then success rates, quartiles and figures.
 
 Every argument is checked before Ray starts: the task name, the seed list, the ``--set``
-and ``--grid`` assignments and, when the task's parser can be built, every flag a run
-will get (so a typo fails in a second, not in twenty processes).
+and ``--grid`` assignments, the form of ``--address`` and, when the task's parser can be
+built, every flag a run will get (so a typo fails in a second, not in twenty processes).
+
+Without ``--address`` the sweep starts a Ray of its own, whatever Ray runs (or ran) on
+the machine. A cluster named by ``--address`` must accept a connection within
+:data:`CONNECT_TIMEOUT` seconds, or the sweep stops with a message naming it. The sweep
+holds an exclusive lock on ``DIR/sweep.lock`` while it runs: a second sweep into the same
+directory stops at once instead of writing alongside it (the kernel releases the lock
+when the holder exits, even when it is killed).
 """
 from __future__ import annotations
 
@@ -15,6 +22,7 @@ import itertools
 import logging
 import os
 import re
+import socket
 import sys
 import time
 from typing import Any, Dict, List, Optional, Sequence, Tuple
@@ -24,8 +32,9 @@ from pilco.files import write_json_atomic
 from . import aggregate, figures, runs
 from .runs import RunSpec
 
-__all__ = ["DEFAULT_TASKS", "task_names", "task_parser", "parse_seeds", "parse_assignment",
-           "setting_flags", "build_parser", "plan", "main"]
+__all__ = ["DEFAULT_TASKS", "CONNECT_TIMEOUT", "LOCK_FILE", "SweepError", "task_names",
+           "task_parser", "parse_seeds", "parse_assignment", "setting_flags", "build_parser",
+           "split_address", "check_ray_address", "lock_output", "plan", "main"]
 
 logger = logging.getLogger("pilco.sweep")
 
@@ -35,8 +44,23 @@ DEFAULT_TASKS = ("cartpole", "reacher", "damaged_reacher", "adaptation", "pendul
 #: flags the sweep passes to every run itself (``--set``/``--grid`` keys may not name them)
 RESERVED = ("seed", "output", "resume", "quiet", "no_render", "no_figures", "help")
 
+#: seconds a Ray cluster named by --address has to accept a connection
+CONNECT_TIMEOUT = 5.0
+
+#: the file in the sweep directory that a running sweep holds locked
+LOCK_FILE = "sweep.lock"
+
+#: Ray's default ports: the head's GCS (HOST:PORT addresses) and the Ray client server
+RAY_CLIENT_PORT = 10001
+
 _KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 _TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
+_HOST_PORT = re.compile(r"^(?:\[(?P<ip6>[0-9A-Fa-f:.]+)\]|(?P<host>[A-Za-z0-9_.-]+))"
+                        r"(?::(?P<port>\d+))?$")
+
+
+class SweepError(Exception):
+    """A sweep that cannot start: its directory is in use, its Ray cluster does not answer."""
 
 
 def task_names() -> Tuple[str, ...]:
@@ -193,6 +217,122 @@ def check_task_flags(parser: argparse.ArgumentParser, flags: Sequence[str]) -> N
         raise ValueError(str(err)) from None
 
 
+def split_address(address: str) -> Optional[Tuple[str, int]]:
+    """``(host, port)`` that ``--address`` connects to: ``HOST:PORT`` (a head's GCS port)
+    or ``ray://HOST[:PORT]`` (the Ray client, port 10001 by default); None for ``auto``,
+    ``local`` and other ``SCHEME://`` addresses (left to Ray). ValueError for anything
+    else."""
+    if not isinstance(address, str) or not address.strip():
+        raise ValueError(f"--address must be auto, HOST:PORT or ray://HOST[:PORT], "
+                         f"got {address!r}")
+    if address in ("auto", "local"):
+        return None
+    scheme, sep, rest = address.partition("://")
+    if sep and scheme != "ray":
+        return None  # a Ray client plug-in's scheme: Ray checks it
+    m = _HOST_PORT.match(rest if sep else address)
+    if m is None or (not sep and m.group("port") is None):
+        raise ValueError(f"--address must be auto, HOST:PORT or ray://HOST[:PORT], "
+                         f"got {address!r}")
+    port = int(m.group("port")) if m.group("port") is not None else RAY_CLIENT_PORT
+    if not 0 < port < 65536:
+        raise ValueError(f"--address {address}: port {port} is not in 1-65535")
+    return m.group("ip6") or m.group("host"), port
+
+
+def _ray_address_file() -> str:
+    """The file in which ``ray start --head`` records its address (Ray's temporary
+    folder: ``$RAY_TMPDIR/ray``, on Linux else ``$TMPDIR/ray``, else ``/tmp/ray``)."""
+    try:
+        from ray._common.utils import get_ray_address_file  # Ray's own rule
+
+        return get_ray_address_file(None)
+    except Exception:  # noqa: BLE001 - an older or newer Ray: the same rule, by hand
+        base = os.environ.get("RAY_TMPDIR") or (
+            os.environ.get("TMPDIR") if sys.platform.startswith("linux") else None) or "/tmp"
+        return os.path.join(base, "ray", "ray_current_cluster")
+
+
+def _auto_address() -> Tuple[Optional[str], str]:
+    """What ``--address auto`` connects to first, as Ray finds it: ``RAY_ADDRESS``, else
+    the address recorded by the last ``ray start --head`` here; ``(None, "")`` when
+    neither is set (Ray then looks for any Ray process on the machine)."""
+    env = os.environ.get("RAY_ADDRESS", "").strip()
+    if env:
+        return env, "the RAY_ADDRESS environment variable"
+    path = _ray_address_file()
+    try:
+        with open(path, encoding="utf-8") as fh:
+            recorded = fh.read().strip()
+    except OSError:
+        return None, ""
+    return (recorded, path) if recorded else (None, "")
+
+
+def check_ray_address(address: Optional[str], timeout: float = CONNECT_TIMEOUT) -> None:
+    """Raise :class:`SweepError` unless the Ray cluster ``address`` names accepts a TCP
+    connection within ``timeout`` seconds (``ray.init`` would wait for minutes on a
+    cluster that is gone). ``None``/``local`` (a Ray of the sweep's own) pass; ``auto``
+    checks the address Ray would take (``RAY_ADDRESS`` or the one recorded by ``ray
+    start``), so a stopped head's stale record fails here."""
+    if address in (None, "local"):
+        return
+    target, source = (address, "") if address != "auto" else _auto_address()
+    if target is None:
+        return  # ray.init(address="auto") looks for a running Ray itself
+    try:
+        where = split_address(target)
+    except ValueError as err:
+        raise SweepError(f"--address {address}: {target!r} from {source} is no Ray "
+                         f"address ({err})") from None
+    if where is None:
+        return
+    host, port = where
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except OSError as err:
+        reason = f"no answer within {timeout:g} s" if isinstance(err, socket.timeout) \
+            else (err.strerror or str(err))
+        named = f"{target} (recorded in {source})" if source else target
+        advice = ("that cluster has stopped: start one with `ray start --head`, or "
+                  f"remove {source}" if source.endswith("ray_current_cluster") else
+                  "is the cluster running and its port open from here?")
+        raise SweepError(f"--address {address}: no Ray cluster answers at {named}: "
+                         f"{reason}; {advice}; or leave out --address for a Ray of the "
+                         f"sweep's own") from None
+
+
+def lock_output(directory: str):
+    """Hold an exclusive lock on ``directory``/``sweep.lock`` (created with the directory)
+    and return its open file: the lock lasts until that file is closed or the process
+    ends, however it ends. :class:`SweepError` naming the holder when another process
+    holds it."""
+    os.makedirs(directory, exist_ok=True)
+    path = os.path.join(directory, LOCK_FILE)
+    fh = open(path, "a+", encoding="utf-8")
+    try:
+        import fcntl
+    except ImportError:  # no flock (Windows): no protection, say so
+        logger.warning("cannot lock %s on this system: do not start a second sweep into "
+                       "it", directory)
+        return fh
+    try:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        fh.seek(0)
+        holder = fh.read().strip() or "a process"
+        fh.close()
+        raise SweepError(f"another sweep ({holder}) is running in {directory}: wait for "
+                         f"it to end, or choose another --output") from None
+    fh.seek(0)
+    fh.truncate()
+    fh.write(f"pid {os.getpid()} on {socket.gethostname()} since "
+             f"{time.strftime('%Y-%m-%dT%H:%M:%S')}\n")
+    fh.flush()
+    return fh
+
+
 def build_parser() -> argparse.ArgumentParser:
     tasks = task_names()
     parser = argparse.ArgumentParser(
@@ -226,8 +366,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="run every combination of these values, each for every seed "
                              "(repeatable)")
     parser.add_argument("--address", default=None,
-                        help="Ray cluster to use: 'auto' (the cluster on this machine) or "
-                             "ray://HOST:10001; default: start a local Ray")
+                        help="Ray cluster to use: 'auto' (the cluster on this machine), "
+                             "HOST:PORT (a head's address) or ray://HOST:10001; default: "
+                             "start a local Ray of the sweep's own")
     parser.add_argument("--num-cpus", type=int, default=None,
                         help="CPUs of the local Ray (default: all); not with --address")
     parser.add_argument("--cpus-per-run", type=int, default=1,
@@ -251,6 +392,10 @@ def plan(args: argparse.Namespace, extra: Sequence[str]) -> Tuple[List[RunSpec],
         raise ValueError(f"--cpus-per-run must be at least 1, got {args.cpus_per_run}")
     if args.max_retries < 0:
         raise ValueError(f"--max-retries must be at least 0, got {args.max_retries}")
+    if args.address is not None:
+        split_address(args.address)
+        if args.address == "local":
+            args.address = None  # the default, said explicitly
     if args.num_cpus is not None and (args.num_cpus < 1 or args.address):
         raise ValueError("--num-cpus must be at least 1 and is for a local Ray only")
     for flag in extra:
@@ -293,7 +438,13 @@ def _start_ray(args: argparse.Namespace) -> Tuple[bool, float]:
         return False, 0.0
     t0 = time.perf_counter()
     if args.address:
-        ray.init(address=args.address, log_to_driver=False, logging_level=logging.WARNING)
+        try:
+            ray.init(address=args.address, log_to_driver=False,
+                     logging_level=logging.WARNING)
+        except Exception as err:  # noqa: BLE001 - Ray raises several kinds; all mean this
+            raise SweepError(f"--address {args.address}: Ray could not connect ({err}); "
+                             f"start a cluster (`ray start --head`), or leave out "
+                             f"--address for a Ray of the sweep's own") from err
     else:
         # local workers and their runs import the same pilco as this process
         import pilco
@@ -320,7 +471,8 @@ def _on_result(spec: RunSpec, summary: Dict[str, Any]) -> None:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the sweep; exit status 0 (every run finished), 1 (some failed), 130
-    (interrupted), 2 (bad arguments)."""
+    (interrupted: Ctrl-C or SIGTERM), 2 (bad arguments, the output directory in use by
+    another sweep, a Ray cluster that does not answer)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     extra: List[str] = []
     if "--" in argv:
@@ -332,10 +484,27 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     _configure_logging(args.log_level)
     try:
         specs, described = plan(args, extra)
-        done = {spec: runs.finished_summary(spec) for spec in specs}
     except ValueError as err:
         parser.error(str(err))
     output = os.path.dirname(os.path.dirname(specs[0].directory))
+    try:
+        lock = lock_output(output)
+    except SweepError as err:
+        parser.exit(2, f"{parser.prog}: error: {err}\n")
+    try:
+        try:
+            done = {spec: runs.finished_summary(spec) for spec in specs}
+        except ValueError as err:
+            parser.error(str(err))
+        return _sweep(args, parser, specs, described, extra, output, done)
+    finally:
+        lock.close()
+
+
+def _sweep(args: argparse.Namespace, parser: argparse.ArgumentParser,
+           specs: Sequence[RunSpec], described: Sequence[Dict], extra: Sequence[str],
+           output: str, done: Dict[RunSpec, Optional[Dict[str, Any]]]) -> int:
+    """Run the unfinished ``specs`` (the output directory locked), write the report."""
     todo = [spec for spec in specs if done[spec] is None]
     logger.info("%s: %d run(s) in %d setting(s), %d finished already, %d to run", args.task,
                 len(specs), len(described), len(specs) - len(todo), len(todo))
@@ -345,9 +514,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         if todo:
             try:
+                check_ray_address(args.address)
                 started, ray_seconds = _start_ray(args)
             except KeyboardInterrupt:
                 outcome = runs.SweepOutcome(not_run=list(todo), interrupted=True)
+            except SweepError as err:
+                parser.exit(2, f"{parser.prog}: error: {err}\n")
             else:
                 from tqdm.contrib.logging import logging_redirect_tqdm
 

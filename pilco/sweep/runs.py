@@ -14,12 +14,17 @@ A process that exits non-zero or leaves no complete summary raises :class:`RunFa
 its Ray task, which Ray retries (``retry_exceptions``), as it retries a task whose worker
 died; after ``max_retries`` retries the run is recorded as failed with its exit code and
 the last lines of its standard error.
+
+A retry, and a run that an earlier sweep with the same flags left unfinished, continues
+from the episodes saved in its directory (the task's ``--resume``): a killed run loses
+at most the episode in progress and counts no episode twice.
 """
 from __future__ import annotations
 
 import collections
 import contextlib
 import dataclasses
+import functools
 import json
 import logging
 import os
@@ -36,8 +41,8 @@ from pilco.experiment.signals import signal_handler
 from pilco.files import write_json_atomic
 
 __all__ = ["RunSpec", "RunFailed", "SweepOutcome", "THREAD_VARIABLES", "SUMMARY", "RUN_RECORD",
-           "ATTEMPTS", "thread_environment", "read_json", "summary_complete", "finished_summary",
-           "execute_run", "execute"]
+           "ATTEMPTS", "PROGRESS", "thread_environment", "read_json", "summary_complete",
+           "finished_summary", "saved_episodes", "execute_run", "execute"]
 
 logger = logging.getLogger(__name__)
 
@@ -45,6 +50,8 @@ logger = logging.getLogger(__name__)
 SUMMARY = "summary.json"
 #: the driver's record of a run: command, status, exit code, output tails, node
 RUN_RECORD = "sweep-run.json"
+#: a run's saved state, written by the run after every episode (what ``--resume`` reads)
+PROGRESS = "progress.json"
 
 #: environment variables that size TensorFlow's and the BLAS libraries' thread pools
 THREAD_VARIABLES = ("TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS", "OMP_NUM_THREADS",
@@ -146,23 +153,34 @@ def finished_summary(spec: RunSpec) -> Optional[Dict[str, Any]]:
     directory's ``sweep-run.json`` records a run that did not finish (pending, failed,
     interrupted). A summary without ``sweep-run.json`` (a run started by hand) counts.
     Raises ValueError when the directory holds a run of another task, seed or
-    flags (the sweep would mix settings)."""
+    flags, finished or not (the sweep would mix settings)."""
+    record = read_json(os.path.join(spec.directory, RUN_RECORD))
+    # checked for unfinished runs too: the sweep continues those from their saved episodes
+    if record is not None and list(record.get("flags", [])) != list(spec.flags):
+        raise ValueError(f"{spec.directory} holds a run made with the flags "
+                         f"{' '.join(record.get('flags', [])) or '(none)'}, not "
+                         f"{' '.join(spec.flags) or '(none)'}: choose another --output "
+                         f"or remove that directory")
     summary = read_json(os.path.join(spec.directory, SUMMARY))
     if not summary_complete(summary) or not summary.get("episodes"):
         return None
-    record = read_json(os.path.join(spec.directory, RUN_RECORD))
     if record is not None and record.get("status") != "finished":
         return None  # what a stopped or failed run left is no result
     if summary.get("task") not in (None, spec.task) or \
             summary.get("seed") not in (None, spec.seed):
         raise ValueError(f"{spec.directory} holds a run of task {summary.get('task')!r} "
                          f"seed {summary.get('seed')!r}, not {spec.task!r} seed {spec.seed}")
-    if record is not None and list(record.get("flags", [])) != list(spec.flags):
-        raise ValueError(f"{spec.directory} holds a run made with the flags "
-                         f"{' '.join(record.get('flags', [])) or '(none)'}, not "
-                         f"{' '.join(spec.flags) or '(none)'}: choose another --output "
-                         f"or remove that directory")
     return summary
+
+
+def saved_episodes(directory: str) -> Optional[int]:
+    """The episodes the ``progress.json`` in ``directory`` counts, or None when there is
+    no readable one (nothing to resume)."""
+    progress = read_json(os.path.join(directory, PROGRESS))
+    done = None if progress is None else progress.get("episodes_done")
+    if isinstance(done, bool) or not isinstance(done, int) or done < 0:
+        return None
+    return done
 
 
 # -------------------------------------------------------------------------- worker side
@@ -189,14 +207,18 @@ def _writable_directory(spec: RunSpec) -> str:
     return fallback
 
 
-def _die_with_parent() -> None:  # pragma: no cover - runs in the child before exec
-    """Linux: the run gets SIGTERM if its Ray worker dies, instead of running on."""
+def _die_with_parent(parent: int) -> None:  # pragma: no cover - in the child before exec
+    """Linux: the run gets SIGTERM if its Ray worker (pid ``parent``) dies, instead of
+    running on beside the retry; a worker that died before this took effect has left
+    the child to another parent already, and the child ends at once."""
     try:
         import ctypes
 
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
-        pass
+        return
+    if os.getppid() != parent:
+        os._exit(1)
 
 
 def _stop(proc: subprocess.Popen, grace: float = 5.0) -> None:
@@ -211,34 +233,51 @@ def _stop(proc: subprocess.Popen, grace: float = 5.0) -> None:
         proc.wait()
 
 
-def execute_run(spec: RunSpec, threads: int = 1) -> Dict[str, Any]:
+def execute_run(spec: RunSpec, threads: int = 1, resume_saved: bool = False
+                ) -> Dict[str, Any]:
     """Run ``spec``'s process with ``threads`` threads and return ``{"summary",
     "stdout_tail", "stderr_tail", "node", "directory", "seconds", "returncode",
     "attempts"}``.
 
     Its standard output and error go to ``stdout.log`` and ``stderr.log`` in the run
-    directory, a line per attempt to ``attempts.log``. Raises :class:`RunFailed` when
-    the process exits non-zero or leaves no complete ``summary.json``. An interrupt (a
-    cancelled Ray task) stops the process.
+    directory, a line per attempt to ``attempts.log``. The process continues the run
+    saved in the directory (``--resume``) when it is a retry (an earlier attempt of this
+    submission saved it) or when ``resume_saved`` says that what the directory holds is
+    this run's (the driver knows it from the directory's ``sweep-run.json``); otherwise
+    it starts afresh. Raises :class:`RunFailed` when the process exits non-zero or leaves
+    no complete ``summary.json``. An interrupt (a cancelled Ray task) stops the process.
     """
     start = time.perf_counter()
     directory = _writable_directory(spec)
     with open(os.path.join(directory, ATTEMPTS), "a+", encoding="utf-8") as fh:
-        fh.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} {socket.gethostname()} "
-                 f"pid {os.getpid()}\n")
         fh.seek(0)
-        attempt = sum(1 for _ in fh)
+        attempt = sum(1 for _ in fh) + 1
+        saved = saved_episodes(directory) if resume_saved or attempt > 1 else None
+        fh.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} {socket.gethostname()} "
+                 f"pid {os.getpid()} "
+                 f"{'new run' if saved is None else f'resume after episode {saved}'}\n")
     with contextlib.suppress(FileNotFoundError):
         os.remove(os.path.join(directory, SUMMARY))  # an unfinished run's, never a result
+    command = spec.command(directory)
+    if saved is not None:
+        # the flags given again win over the saved ones, so the run keeps this setting
+        command += ["--resume", directory]
     out_path = os.path.join(directory, "stdout.log")
     err_path = os.path.join(directory, "stderr.log")
     with open(out_path, "wb") as out, open(err_path, "wb") as err:
-        proc = subprocess.Popen(spec.command(directory), stdout=out, stderr=err,
+        proc = subprocess.Popen(command, stdout=out, stderr=err,
                                 stdin=subprocess.DEVNULL, env=thread_environment(threads),
-                                preexec_fn=_die_with_parent if sys.platform == "linux"
-                                else None)
+                                preexec_fn=functools.partial(_die_with_parent, os.getpid())
+                                if sys.platform == "linux" else None)
         try:
-            returncode = proc.wait()
+            # waits of a second: Ray cancels a task by raising KeyboardInterrupt between
+            # two bytecodes, which never happens inside one long blocking wait
+            while True:
+                try:
+                    returncode = proc.wait(timeout=1.0)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
         except BaseException:
             _stop(proc)
             raise
@@ -310,38 +349,53 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
                                              retry_exceptions=True)
     outcome = SweepOutcome()
     pending: Dict[Any, RunSpec] = {}
+
+    def collect(ref, stopped: bool = False) -> None:
+        """Record the result of ``ref`` (a finished task) in its run's directory and in
+        ``outcome``; once ``stopped``, a failure is the interrupt's and raises instead.
+        The run leaves ``pending`` only when it is recorded."""
+        spec = pending[ref]
+        try:
+            result = ray.get(ref)
+        except (ray.exceptions.RayError, RunFailed) as err:
+            if stopped:
+                raise
+            failure = _failure(spec, err, max_retries + 1)
+            _record(spec, status="failed", **failure)
+            outcome.failed.append((spec, failure))
+            logger.warning("%s failed after %d attempt(s): %s", spec.name,
+                           failure["attempts"], failure["error"])
+        else:
+            summary = result["summary"]
+            write_json_atomic(os.path.join(spec.directory, SUMMARY), summary)
+            _record(spec, status="finished",
+                    **{k: v for k, v in result.items() if k != "summary"})
+            outcome.finished.append(spec)
+            if on_result is not None:
+                on_result(spec, summary)
+        del pending[ref]
+
     bar = tqdm(total=len(specs), unit="run", desc="sweep", file=sys.stderr,
                disable=not progress, dynamic_ncols=True)
     try:
         with _sigterm_as_interrupt():
             try:
                 for spec in specs:
+                    # a record of this run (same task, seed and flags) means that what the
+                    # directory holds was saved by this run: it continues from there
+                    old = read_json(os.path.join(spec.directory, RUN_RECORD)) or {}
+                    resume_saved = (old.get("task"), old.get("seed"), old.get("flags")) == \
+                        (spec.task, spec.seed, list(spec.flags))
                     # until the driver records it finished, whatever the run leaves in
                     # its directory (a summary written when it was stopped) is no result
                     _record(spec, status="pending")
                     with contextlib.suppress(FileNotFoundError):
                         os.remove(os.path.join(spec.directory, ATTEMPTS))
-                    pending[remote.remote(spec, cpus_per_run)] = spec
+                    pending[remote.remote(spec, cpus_per_run, resume_saved)] = spec
                 while pending:
                     done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
                     for ref in done:
-                        spec = pending.pop(ref)
-                        try:
-                            result = ray.get(ref)
-                        except (ray.exceptions.RayError, RunFailed) as err:
-                            failure = _failure(spec, err, max_retries + 1)
-                            _record(spec, status="failed", **failure)
-                            outcome.failed.append((spec, failure))
-                            logger.warning("%s failed after %d attempt(s): %s", spec.name,
-                                           failure["attempts"], failure["error"])
-                        else:
-                            summary = result["summary"]
-                            write_json_atomic(os.path.join(spec.directory, SUMMARY), summary)
-                            _record(spec, status="finished",
-                                    **{k: v for k, v in result.items() if k != "summary"})
-                            outcome.finished.append(spec)
-                            if on_result is not None:
-                                on_result(spec, summary)
+                        collect(ref)
                         bar.update(1)
             except KeyboardInterrupt:
                 outcome.interrupted = True
@@ -350,9 +404,14 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
                 for ref in pending:
                     with contextlib.suppress(Exception):
                         ray.cancel(ref, force=False)
-                # give running tasks a moment to stop their processes
+                # give running tasks a moment to stop their processes; a run that
+                # finishes meanwhile is kept as finished
                 with contextlib.suppress(Exception, KeyboardInterrupt):
-                    ray.wait(list(pending), num_returns=len(pending), timeout=10.0)
+                    done, _ = ray.wait(list(pending), num_returns=len(pending),
+                                       timeout=10.0)
+                    for ref in done:
+                        with contextlib.suppress(ray.exceptions.RayError, RunFailed):
+                            collect(ref, stopped=True)
                 outcome.not_run.extend(pending.values())
                 for spec in pending.values():
                     with contextlib.suppress(OSError):
