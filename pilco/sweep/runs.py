@@ -123,7 +123,7 @@ def thread_environment(threads: int, base: Optional[Mapping[str, str]] = None
     OpenMP/OpenBLAS/MKL pools set to ``threads`` threads and TensorFlow's intra-op pool
     to one: the policy objective's independent groups of output pairs
     (:func:`pilco.moments.pair_groups`) then run side by side, which uses the CPUs better
-    than splitting each operation (README, Performance)."""
+    than splitting each operation (docs/performance.md)."""
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
     env = dict(os.environ if base is None else base)

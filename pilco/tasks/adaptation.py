@@ -75,15 +75,15 @@ ADDED_LATER = dict(reacher.ADDED_LATER, damaged_cost="all", min_healthy_episodes
 def build_parser() -> argparse.ArgumentParser:
     """The reacher's flags plus the adaptation's."""
     parser = reacher.build_parser(damaged=False)
-    # the healthy reacher's fine cost (--fine-cost-width 0.05) stays: seeds 0-19 recovered
-    # 14/20 with it and 13/20 without (Intel Xeon, both arithmetic paths; README); not its
-    # joint-limit cost: with it seeds 0-3 recovered 0 of 4 times (3 of 4 without)
+    # the healthy reacher's fine cost (--fine-cost-width 0.05) stays, it rewards precision
+    # near the target on the damaged arm too; not its joint-limit cost, with which the
+    # damaged episodes ended short of the target (docs/success-rates.md, "What was tried")
     parser.set_defaults(limit_cost=0.0)
     # nor the healthy reacher's wide start distribution in its first learned episode
     # (--early-start-var): not measured on the adaptation
     parser.set_defaults(early_start_var=0.0)
-    # nor its policy initialised near the start state (seeds 10-19: 6/10 with it, 8/10
-    # without; README)
+    # nor its policy initialised near the start state (measured on the adaptation: it did
+    # not help)
     parser.set_defaults(policy_init_var=0.0)
     # nor its early stop of the policy search (measured on the healthy reacher only)
     parser.set_defaults(policy_min_rel_improvement=None, policy_patience=10)
@@ -110,7 +110,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "dimension, 0 before the damage and 1 after, so that the dynamics "
                         "GPs can learn how far the damaged arm's transitions follow the "
                         "healthy arm's (not which joint broke)")
-    # seeds 0-19 (Intel Xeon): 13/20 recovered with 100, 10/20 with 1 (README)
+    # the healthy transitions give way where the damaged arm's disagree with them, and
+    # keep shaping the model where the two agree (docs/success-rates.md)
     g.add_argument("--old-data-noise", type=positive_float, default=100.0, metavar="F",
                    help="after the damage the model sees the healthy arm's transitions "
                         "with F times the noise variance of the damaged arm's, so that "
@@ -128,7 +129,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="mean squared standardised one-step error of the healthy model on "
                         "the first damaged episode above which a state dimension counts as "
                         "changed by the damage")
-    # seeds 0-19 (Intel Xeon): 16/20 recovered with it at 4ad79ad, 14/20 without (README)
+    # once a joint is known to be stuck, commanding it only adds actions that do nothing;
+    # with its commands seen as 0 the healthy transitions describe the damaged arm too
     g.add_argument("--stop-stuck-joints", action=argparse.BooleanOptionalAction,
                    default=True,
                    help="from the second damaged episode on, stop commanding the joints "
