@@ -51,6 +51,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
@@ -86,7 +87,11 @@ END = "<!-- /results-table -->"
 #: marks the cells of a row typed into table.json instead of computed from an export
 MANUAL_MARK = "†"
 
-TABLE_KEYS = {"task", "label", "rule", "goal", "more", "setting", "manual"}
+TABLE_KEYS = {"task", "label", "rule", "goal", "more", "setting", "data", "manual"}
+
+#: separates a task from a variant's name in an export's file name: a task can have
+#: several exports (e.g. the same sweep with oneDNN on and off), ``<task>--<variant>.json``
+VARIANT_SEP = "--"
 TABLE_REQUIRED = ("task", "label", "rule", "goal")
 MANUAL_KEYS = {"seeds", "result", "per_run", "note"}
 
@@ -256,10 +261,24 @@ def export_sweep(sweep_dir) -> Optional[Dict[str, Any]]:
     return data
 
 
-def write_export(data: Mapping[str, Any], directory=RESULTS_DIR) -> Path:
-    """Write ``data`` to ``directory/<task>.json`` (compact, one line); returns the path."""
+def export_name(task: str, variant: Optional[str] = None) -> str:
+    """The file stem of a task's export: ``task``, or ``task--variant`` for a variant
+    (letters, digits, ``.``, ``_`` and ``-``); ValueError for a bad variant name."""
+    if variant is None:
+        return task
+    if not isinstance(variant, str) or not re.fullmatch(r"[A-Za-z0-9._-]+", variant) \
+            or variant.startswith("-"):
+        raise ValueError(f"bad variant name {variant!r}: use letters, digits, '.', '_' "
+                         "and '-' (not first)")
+    return f"{task}{VARIANT_SEP}{variant}"
+
+
+def write_export(data: Mapping[str, Any], directory=RESULTS_DIR,
+                 variant: Optional[str] = None) -> Path:
+    """Write ``data`` to ``directory/<task>.json``, or ``<task>--<variant>.json`` for a
+    variant (compact, one line); returns the path."""
     check_export(data, f"the export of task {data.get('task')!r}")
-    path = Path(directory) / f"{data['task']}.json"
+    path = Path(directory) / f"{export_name(data['task'], variant)}.json"
     path.write_text(json.dumps(data, separators=(",", ":")) + "\n", encoding="utf-8")
     return path
 
@@ -306,16 +325,18 @@ def load_export(path) -> Dict[str, Any]:
 
 
 def load_exports(directory=RESULTS_DIR) -> Dict[str, Dict[str, Any]]:
-    """``{task: export}`` of every ``<task>.json`` in ``directory`` but ``table.json``."""
+    """``{file stem: export}`` of every ``<task>.json`` and ``<task>--<variant>.json`` in
+    ``directory`` but ``table.json``."""
     exports = {}
     for path in sorted(Path(directory).glob("*.json")):
         if path.name == TABLE_FILE.name:
             continue
         data = load_export(path)
-        if path.stem != data["task"]:
+        task = path.stem.split(VARIANT_SEP, 1)[0]
+        if task != data["task"]:
             raise ValueError(f"{_show(path)} holds task {data['task']!r}: name it "
-                             f"{data['task']}.json")
-        exports[data["task"]] = data
+                             f"{data['task']}.json or {data['task']}{VARIANT_SEP}VARIANT.json")
+        exports[path.stem] = data
     return exports
 
 
@@ -333,8 +354,10 @@ def load_table(path=TABLE_FILE) -> List[Dict[str, Any]]:
 
     The file is ``{"rows": [row, ...]}``; a row has ``task`` (its export is
     ``results/<task>.json``), ``label``, ``rule`` (the success rule), ``goal`` (Markdown
-    text), optionally ``more`` (the "more seeds" note), ``setting`` (which setting of the
-    export; ``"default"`` unless given) and ``manual``: for a task without an export, the
+    text), optionally ``more`` (the "more seeds" note), ``data`` (another export of the
+    task: ``results/<data>.json``, e.g. ``damaged_reacher--onednn-off``), ``setting``
+    (which setting of the export; ``"default"`` unless given) and ``manual``: for a task
+    without an export, the
     row's figures typed in, ``{"seeds", "result", "per_run", "note"}`` (``note`` says
     where they come from and why they are not data). Rows appear in the file's order.
     """
@@ -358,12 +381,18 @@ def load_table(path=TABLE_FILE) -> List[Dict[str, Any]]:
         for key in TABLE_REQUIRED:
             if not isinstance(row.get(key), str) or not row[key].strip():
                 raise ValueError(f"{where}: '{key}' must be a non-empty string")
-        for key in ("more", "setting"):
+        for key in ("more", "setting", "data"):
             if key in row and not isinstance(row[key], str):
                 raise TypeError(f"{where}: '{key}' must be a string")
-        if row["task"] in tasks:
-            raise ValueError(f"{where}: task {row['task']!r} has a row already")
-        tasks.add(row["task"])
+        if "data" in row and row["data"] != row["task"] \
+                and not row["data"].startswith(row["task"] + VARIANT_SEP):
+            raise ValueError(f"{where}: 'data' {row['data']!r} is not an export of task "
+                             f"{row['task']!r} ({row['task']} or "
+                             f"{row['task']}{VARIANT_SEP}VARIANT)")
+        key = (data_name(row), row.get("setting", "default"))
+        if key in tasks:
+            raise ValueError(f"{where}: {key[0]!r}, setting {key[1]!r} has a row already")
+        tasks.add(key)
         if "manual" in row:
             manual = row["manual"]
             if not isinstance(manual, dict) or set(manual) != MANUAL_KEYS or not all(
@@ -372,6 +401,11 @@ def load_table(path=TABLE_FILE) -> List[Dict[str, Any]]:
                                  f"{', '.join(sorted(MANUAL_KEYS))}")
         rows.append(row)
     return rows
+
+
+def data_name(row: Mapping[str, Any]) -> str:
+    """The stem of the export a table row reads: its ``data``, else its ``task``."""
+    return row.get("data", row["task"])
 
 
 def seed_ranges(seeds: Iterable[int]) -> str:
@@ -447,7 +481,7 @@ def table_row(row: Mapping[str, Any], exports: Mapping[str, Mapping[str, Any]],
               directory=RESULTS_DIR) -> List[str]:
     """The cells of one table row: experiment, success rule, seeds, result, more seeds,
     per run, goal."""
-    task = row["task"]
+    task = data_name(row)
     path = Path(directory) / f"{task}.json"
     if "manual" in row:
         if task in exports:
@@ -481,7 +515,7 @@ def source_line(row: Mapping[str, Any], data: Mapping[str, Any]) -> str:
     command = ("`" + " ".join(data["command"]) + "`" if data.get("command")
                else "a sweep exported before it wrote sweep.json")
     which = "" if setting == "default" else f", setting `{setting}`"
-    return (f"- {row['label']}: `results/{row['task']}.json`{which}, {command}; "
+    return (f"- {row['label']}: `results/{data_name(row)}.json`{which}, {command}; "
             f"commit {count_label(provenance['commit'])}; "
             f"`TF_ENABLE_ONEDNN_OPTS`: {count_label(provenance['onednn'])}")
 
@@ -495,7 +529,8 @@ def render_table(rows: Sequence[Mapping[str, Any]],
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in rows:
         lines.append("| " + " | ".join(table_row(row, exports, directory)) + " |")
-    sources = [source_line(row, exports[row["task"]]) for row in rows if "manual" not in row]
+    sources = [source_line(row, exports[data_name(row)]) for row in rows
+               if "manual" not in row]
     if sources:
         lines += ["", "The data of each row (per run: median over the finished runs):", ""]
         lines += sources
@@ -530,9 +565,11 @@ def with_table(text: str, table: str, where: str = "README.md") -> str:
 
 
 # ---------------------------------------------------------------------------- figures
-def draw_figures(data: Mapping[str, Any], directory=FIGURE_DIR) -> List[str]:
-    """``<task>_success_rate.png`` and ``<task>_distance_bands.png`` of one export (one
-    line or panel per setting); returns the paths drawn."""
+def draw_figures(data: Mapping[str, Any], directory=FIGURE_DIR,
+                 name: Optional[str] = None) -> List[str]:
+    """``<name>_success_rate.png`` and ``<name>_distance_bands.png`` of one export (one
+    line or panel per setting; ``name`` the export's file stem, default its task);
+    returns the paths drawn."""
     from pilco.sweep.figures import distance_bands_figure, success_rate_figure
 
     per_setting = {s: [as_summary(r) for r in data["runs"] if r["setting"] == s]
@@ -540,7 +577,7 @@ def draw_figures(data: Mapping[str, Any], directory=FIGURE_DIR) -> List[str]:
     seeds = sorted({r["seed"] for r in data["runs"]} if not data.get("seeds")
                    else data["seeds"])
     title = f"{data['task']}, seeds {seed_ranges(seeds)}"
-    task = data["task"]
+    task = name or data["task"]
     drawn = [success_rate_figure(per_setting, os.path.join(directory, f"{task}_success_rate.png"),
                                  title=title),
              distance_bands_figure(per_setting,
@@ -550,7 +587,12 @@ def draw_figures(data: Mapping[str, Any], directory=FIGURE_DIR) -> List[str]:
 
 
 # ------------------------------------------------------------------------ command line
-def export_main(sweeps: Sequence[str], directory=RESULTS_DIR) -> int:
+def export_main(sweeps: Sequence[str], directory=RESULTS_DIR,
+                variant: Optional[str] = None) -> int:
+    if variant is not None:
+        export_name("task", variant)   # a bad name fails before any file is read
+        if len(sweeps) != 1:
+            raise ValueError("--variant names the export of one sweep directory")
     status = 0
     for sweep_dir in sweeps:
         if not os.path.isdir(sweep_dir):
@@ -561,7 +603,7 @@ def export_main(sweeps: Sequence[str], directory=RESULTS_DIR) -> int:
         if data is None:
             print(f"{sweep_dir}: no finished run yet, skipped", file=sys.stderr)
             continue
-        path = write_export(data, directory)
+        path = write_export(data, directory, variant)
         size = path.stat().st_size
         print(f"{_show(path)}: {len(data['runs'])} finished runs, {size / 1e3:.0f} kB")
         if size > MAX_BYTES:
@@ -588,8 +630,8 @@ def render_main(check: bool, figures: bool) -> int:
     else:
         print("README.md: success table unchanged")
     if figures:
-        for data in exports.values():
-            for path in draw_figures(data):
+        for name, data in exports.items():
+            for path in draw_figures(data, name=name):
                 print(f"{_show(path)} drawn")
     return 0
 
@@ -600,6 +642,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     export = commands.add_parser("export", help="write results/<task>.json from sweeps")
     export.add_argument("sweeps", nargs="+", metavar="SWEEP_DIR",
                         help="a pilco.sweep --output directory")
+    export.add_argument("--variant", default=None,
+                        help="write results/<task>--VARIANT.json instead of <task>.json "
+                             "(another sweep of the same task, e.g. with oneDNN off)")
     render = commands.add_parser("render", help="rewrite the README table and the figures")
     render.add_argument("--check", action="store_true",
                         help="write nothing; status 1 when the README's table is stale")
@@ -607,7 +652,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parser.parse_args(argv)
     try:
         if args.command == "export":
-            return export_main(args.sweeps)
+            return export_main(args.sweeps, variant=args.variant)
         return render_main(check=args.check, figures=not args.no_figures)
     except (OSError, ValueError, TypeError) as e:
         print(f"error: {e}", file=sys.stderr)

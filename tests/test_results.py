@@ -66,8 +66,9 @@ def test_rows_without_committed_data_are_exactly_the_manual_ones():
 def test_committed_exports_are_small_and_named_by_task():
     exports = build.load_exports()             # checks format, runs and their aggregates
     assert exports
-    for task in exports:
-        assert (build.RESULTS_DIR / f"{task}.json").stat().st_size < build.MAX_BYTES
+    for name, data in exports.items():
+        assert (build.RESULTS_DIR / f"{name}.json").stat().st_size < build.MAX_BYTES
+        assert name.split(build.VARIANT_SEP)[0] == data["task"]
 
 
 # --------------------------------------------------------------- a synthetic sweep
@@ -262,6 +263,41 @@ def test_manual_row_is_marked_and_a_missing_export_named(tmp_path):
         build.table_row({**ROW, "task": "ghost"}, {}, directory=tmp_path)
     with pytest.raises(ValueError, match="no setting 'wide'"):
         build.table_row({**ROW, "setting": "wide"}, {"reacher": _export(1, 0)})
+
+
+def test_a_variant_export_backs_its_own_row(sweep, tmp_path):
+    """A second sweep of a task (e.g. with oneDNN off) is ``<task>--<variant>.json``, read
+    by a table row through its ``data`` key, with its own command and counts."""
+    out = tmp_path / "results"
+    out.mkdir()
+    assert build.export_main([str(sweep)], directory=out) == 0
+    assert build.export_main([str(sweep)], directory=out, variant="onednn-off") == 0
+    assert sorted(p.name for p in out.iterdir()) == ["reacher--onednn-off.json",
+                                                    "reacher.json"]
+    exports = build.load_exports(out)
+    assert set(exports) == {"reacher", "reacher--onednn-off"}
+    variant = {**ROW, "label": "reacher, oneDNN off", "data": "reacher--onednn-off"}
+    path = tmp_path / "table.json"
+    path.write_text(json.dumps({"rows": [ROW, variant]}), encoding="utf-8")
+    rows = build.load_table(path)
+    table = build.render_table(rows, exports, directory=out)
+    assert "- reacher, oneDNN off: `results/reacher--onednn-off.json`" in table
+    assert build.table_row(variant, exports, directory=out)[3].startswith("**1/2**")
+    drawn = build.draw_figures(exports["reacher--onednn-off"], directory=tmp_path,
+                               name="reacher--onednn-off")
+    assert sorted(os.path.basename(p) for p in drawn) == [
+        "reacher--onednn-off_distance_bands.png", "reacher--onednn-off_success_rate.png"]
+    # a variant's file must hold its task, and a row's data must be an export of its task
+    (out / "cartpole--x.json").write_text((out / "reacher.json").read_text())
+    with pytest.raises(ValueError, match="holds task 'reacher'"):
+        build.load_exports(out)
+    path.write_text(json.dumps({"rows": [{**ROW, "data": "cartpole--x"}]}))
+    with pytest.raises(ValueError, match="not an export of task 'reacher'"):
+        build.load_table(path)
+    with pytest.raises(ValueError, match="bad variant name"):
+        build.export_main([str(sweep)], directory=out, variant="a/b")
+    with pytest.raises(ValueError, match="one sweep directory"):
+        build.export_main([str(sweep), str(sweep)], directory=out, variant="v")
 
 
 @pytest.mark.parametrize("rows, error, match", [
