@@ -311,15 +311,21 @@ def check_export(data: Any, where: str) -> None:
                          "(edited by hand?); export the sweep again")
 
 
-def load_export(path) -> Dict[str, Any]:
-    """The checked export in ``path`` (FileNotFoundError naming it when it is missing)."""
+def read_json_file(path) -> Any:
+    """The parsed JSON file ``path``: FileNotFoundError when it is missing, ValueError
+    when it is not JSON, each naming the file."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{_show(path)}: no such file")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        return json.loads(path.read_text(encoding="utf-8"))
     except ValueError as e:
         raise ValueError(f"{_show(path)}: not valid JSON ({e})") from None
+
+
+def load_export(path) -> Dict[str, Any]:
+    """The checked export in ``path`` (FileNotFoundError naming it when it is missing)."""
+    data = read_json_file(path)
     check_export(data, _show(path))
     return data
 
@@ -362,12 +368,7 @@ def load_table(path=TABLE_FILE) -> List[Dict[str, Any]]:
     where they come from and why they are not data). Rows appear in the file's order.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{_show(path)}: no such file")
-    try:
-        table = json.loads(path.read_text(encoding="utf-8"))
-    except ValueError as e:
-        raise ValueError(f"{_show(path)}: not valid JSON ({e})") from None
+    table = read_json_file(path)
     if not isinstance(table, dict) or not isinstance(table.get("rows"), list):
         raise TypeError(f"{_show(path)}: expected {{\"rows\": [...]}}")
     rows, tasks = [], set()

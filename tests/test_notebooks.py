@@ -14,12 +14,11 @@ ignores the stored outputs.
 from __future__ import annotations
 
 import copy
-import importlib.util
 import json
 import os
-import sys
 
 import pytest
+from _scripts import load_script
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 NOTEBOOK_DIR = os.path.join(ROOT, "notebooks")
@@ -37,19 +36,7 @@ EXPECTED_REQUIREMENTS = {
 FAST_SWITCH = 'os.environ.get("PILCO_NOTEBOOK_FAST", "0") == "1"'
 
 
-def _load_module(name, path):
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    dont_write = sys.dont_write_bytecode
-    sys.dont_write_bytecode = True      # no __pycache__ in notebooks/
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        sys.dont_write_bytecode = dont_write
-    return module
-
-
-execute = _load_module("_pilco_notebooks_execute", os.path.join(NOTEBOOK_DIR, "execute.py"))
+execute = load_script("_pilco_notebooks_execute", os.path.join(NOTEBOOK_DIR, "execute.py"))
 
 
 def _load(name):
@@ -134,7 +121,7 @@ def test_notebook_has_a_fast_switch(name):
 
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_notebook_declares_its_requirements(name):
-    conftest = _load_module("_pilco_root_conftest", os.path.join(ROOT, "conftest.py"))
+    conftest = load_script("_pilco_root_conftest", os.path.join(ROOT, "conftest.py"))
     assert conftest.notebook_requirements(os.path.join(NOTEBOOK_DIR, name)) \
         == EXPECTED_REQUIREMENTS[name]
 

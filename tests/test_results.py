@@ -7,31 +7,17 @@ marked manual. The exporter and the table are checked on small synthetic sweeps.
 from __future__ import annotations
 
 import copy
-import importlib.util
 import json
 import os
-import sys
 from pathlib import Path
 
 import pytest
+from _scripts import load_script
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _load_build():
-    spec = importlib.util.spec_from_file_location("_pilco_results_build",
-                                                  ROOT / "results" / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    dont_write = sys.dont_write_bytecode
-    sys.dont_write_bytecode = True      # no __pycache__ in results/
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        sys.dont_write_bytecode = dont_write
-    return module
-
-
-build = _load_build()
+build = load_script("_pilco_results_build", ROOT / "results" / "build.py")
 
 
 # ------------------------------------------------------------------ the committed data
