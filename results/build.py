@@ -261,15 +261,21 @@ def export_sweep(sweep_dir) -> Optional[Dict[str, Any]]:
     return data
 
 
-def export_name(task: str, variant: Optional[str] = None) -> str:
-    """The file stem of a task's export: ``task``, or ``task--variant`` for a variant
-    (letters, digits, ``.``, ``_`` and ``-``); ValueError for a bad variant name."""
-    if variant is None:
-        return task
+def check_variant(variant: Any) -> None:
+    """ValueError unless ``variant`` is a variant name: letters, digits, ``.``, ``_`` and
+    ``-`` (not first)."""
     if not isinstance(variant, str) or not re.fullmatch(r"[A-Za-z0-9._-]+", variant) \
             or variant.startswith("-"):
         raise ValueError(f"bad variant name {variant!r}: use letters, digits, '.', '_' "
                          "and '-' (not first)")
+
+
+def export_name(task: str, variant: Optional[str] = None) -> str:
+    """The file stem of a task's export: ``task``, or ``task--variant`` for a variant
+    (:func:`check_variant`)."""
+    if variant is None:
+        return task
+    check_variant(variant)
     return f"{task}{VARIANT_SEP}{variant}"
 
 
@@ -371,7 +377,7 @@ def load_table(path=TABLE_FILE) -> List[Dict[str, Any]]:
     table = read_json_file(path)
     if not isinstance(table, dict) or not isinstance(table.get("rows"), list):
         raise TypeError(f"{_show(path)}: expected {{\"rows\": [...]}}")
-    rows, tasks = [], set()
+    rows, seen = [], set()
     for k, row in enumerate(table["rows"]):
         where = f"{_show(path)}: rows[{k}]"
         if not isinstance(row, dict):
@@ -391,9 +397,9 @@ def load_table(path=TABLE_FILE) -> List[Dict[str, Any]]:
                              f"{row['task']!r} ({row['task']} or "
                              f"{row['task']}{VARIANT_SEP}VARIANT)")
         key = (data_name(row), row.get("setting", "default"))
-        if key in tasks:
+        if key in seen:
             raise ValueError(f"{where}: {key[0]!r}, setting {key[1]!r} has a row already")
-        tasks.add(key)
+        seen.add(key)
         if "manual" in row:
             manual = row["manual"]
             if not isinstance(manual, dict) or set(manual) != MANUAL_KEYS or not all(
@@ -591,7 +597,7 @@ def draw_figures(data: Mapping[str, Any], directory=FIGURE_DIR,
 def export_main(sweeps: Sequence[str], directory=RESULTS_DIR,
                 variant: Optional[str] = None) -> int:
     if variant is not None:
-        export_name("task", variant)   # a bad name fails before any file is read
+        check_variant(variant)   # a bad name fails before any file is read
         if len(sweeps) != 1:
             raise ValueError("--variant names the export of one sweep directory")
     status = 0

@@ -164,15 +164,21 @@ def shared_ray():
 
 
 # ----------------------------------------------------------------- addresses (no Ray)
-def test_an_unreachable_address_fails_within_seconds(tmp_path, capsys):
-    port = closed_port()
+def refused_within_seconds(out, address, capsys) -> str:
+    """Run a one-run sweep into ``out`` with ``--address address``; assert that it exits
+    with status 2 within the connection timeout (plus start-up); return its stderr."""
     t0 = time.monotonic()
     with pytest.raises(SystemExit) as stop:
-        cli.main(["cartpole", "--seeds", "0", "--output", str(tmp_path), "--no-progress",
-                  "--address", f"127.0.0.1:{port}", "--", *SHORT])
+        cli.main(["cartpole", "--seeds", "0", "--output", str(out), "--no-progress",
+                  "--address", address, "--", *SHORT])
     assert time.monotonic() - t0 < cli.CONNECT_TIMEOUT + 5
     assert stop.value.code == 2
-    err = capsys.readouterr().err
+    return capsys.readouterr().err
+
+
+def test_an_unreachable_address_fails_within_seconds(tmp_path, capsys):
+    port = closed_port()
+    err = refused_within_seconds(tmp_path, f"127.0.0.1:{port}", capsys)
     assert f"no Ray cluster answers at 127.0.0.1:{port}" in err
     assert "leave out --address" in err
     # nothing was started: no run directory, no report, only the released lock
@@ -189,13 +195,7 @@ def test_auto_with_a_stopped_heads_record_fails_within_seconds(tmp_path, monkeyp
     monkeypatch.setenv("RAY_TMPDIR", str(tmp_path / "ray"))
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
     out = tmp_path / "out"
-    t0 = time.monotonic()
-    with pytest.raises(SystemExit) as stop:
-        cli.main(["cartpole", "--seeds", "0", "--output", str(out), "--no-progress",
-                  "--address", "auto", "--", *SHORT])
-    assert time.monotonic() - t0 < cli.CONNECT_TIMEOUT + 5
-    assert stop.value.code == 2
-    err = capsys.readouterr().err
+    err = refused_within_seconds(out, "auto", capsys)
     assert f"127.0.0.1:{port} (recorded in {record})" in err
     assert "ray start --head" in err
     assert os.listdir(out) == [cli.LOCK_FILE]
