@@ -21,22 +21,18 @@ import sys
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
 
-from pilco.experiment.cli import finish  # noqa: E402
-from pilco.tasks import adaptation  # noqa: E402
+from pilco.tasks.adaptation import ADAPTATION as task  # noqa: E402
 
 
 def main(argv=None) -> int:
     # 1. settings (the reacher's, plus the damage and the episode budgets)
-    args = adaptation.parse_args(argv)
+    settings = task.parse(argv)
     # 2. the task: the healthy Fetch arm and its agent
-    exp = adaptation.make_experiment(args)
+    exp = task.experiment(settings)
     # 3. PILCO on the healthy arm until it reaches, the damage, PILCO until it reaches again
-    summary = adaptation.run(exp, args)
+    summary = task.run(exp, settings)
     # 4. report: tables, when the damage came and how many episodes recovery took
-    return finish(exp, summary, args, title="Timing (adaptation)",
-                  notes=[f"\ndamage at episode {summary['damage_at_episode']}; episodes to "
-                         f"recover: {summary['episodes_to_recover']}"],
-                  figures=lambda: adaptation.figures(exp, args))
+    return task.finish(exp, summary, settings)
 
 
 if __name__ == "__main__":

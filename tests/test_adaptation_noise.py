@@ -20,6 +20,7 @@ from pilco.experiment import Experiment, ExperimentConfig
 from pilco.models import PILCO
 from pilco.rewards import ExponentialReward
 from pilco.tasks import adaptation
+from pilco.tasks.adaptation import ADAPTATION
 
 
 class PlaneEnv(gymnasium.Env):
@@ -258,16 +259,16 @@ def test_a_healthy_joint_stays_commanded_and_the_flags_exclude_each_other(damage
     assert ratios[0] == 0.0 and np.isnan(adaptation.joint_follow_ratios(
         [exp.episodes[2]], (1, 0))).sum() == 0
     out = ["--output", str(exp.directory) + "-x"]
-    assert adaptation.parse_args(out).stop_stuck_joints  # the default
-    assert not adaptation.parse_args(["--no-stop-stuck-joints", *out]).stop_stuck_joints
+    assert ADAPTATION.parse(out).stop_stuck_joints  # the default
+    assert not ADAPTATION.parse(["--no-stop-stuck-joints", *out]).stop_stuck_joints
     # the paper code's arm reports commanded angles, which follow a stuck joint's commands
-    paper = adaptation.parse_args(["--preset", "paper-code", *out])
+    paper = ADAPTATION.parse(["--preset", "paper-code", *out])
     assert paper.joint_state == "commanded" and not paper.stop_stuck_joints
-    assert adaptation.parse_args(["--no-stop-stuck-joints", "--changed-output-noise", "1e6",
+    assert ADAPTATION.parse(["--no-stop-stuck-joints", "--changed-output-noise", "1e6",
                                   *out]).changed_output_noise == 1e6
     for clash in (["--changed-output-noise", "1e6"], ["--joint-state", "commanded"]):
         with pytest.raises(SystemExit):
-            adaptation.parse_args([*clash, *out])
+            ADAPTATION.parse([*clash, *out])
 
 
 def test_a_resumed_run_keeps_the_stuck_joint_stopped(damaged_run):

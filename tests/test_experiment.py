@@ -390,37 +390,11 @@ def test_the_policy_search_hook_runs_before_each_policy_search(tmp_path):
     assert seen == [(2, 0), (3, 1), (4, 2)]
 
 
-def test_presets_sit_between_the_defaults_and_the_flags_given(tmp_path):
-    import argparse
-
-    from pilco.experiment.cli import (add_common_arguments, add_preset_argument,
-                                      parse_args_with_resume)
-
-    def parser():
-        p = argparse.ArgumentParser()
-        add_common_arguments(p, episodes=4, steps=50, basis_functions=50, policy_iters=25,
-                             model_iters=100, output=str(tmp_path / "run-{seed}"))
-        add_preset_argument(p, {"wide": {"policy_iters": 30, "horizon": 100}})
-        return p
-
-    assert parse_args_with_resume(parser(), []).policy_iters == 25
-    args = parse_args_with_resume(parser(), ["--preset", "wide", "--horizon", "20"])
-    assert (args.policy_iters, args.horizon, args.preset) == (30, 20, "wide")
-    assert "_presets" not in vars(args)
-    # a resumed run keeps its preset and settings; flags given again still win
-    run = tmp_path / "run-0"
-    run.mkdir()
-    (run / "progress.json").write_text(json.dumps({"args": vars(args)}))
-    resumed = parse_args_with_resume(parser(), ["--resume", str(run), "--episodes", "6"])
-    assert (resumed.policy_iters, resumed.horizon, resumed.episodes) == (30, 20, 6)
-    with pytest.raises(ValueError, match="sets unknown flags"):
-        add_preset_argument(argparse.ArgumentParser(), {"bad": {"nope": 1}})
-
-
 def test_the_reacher_paper_code_preset():
     from pilco.tasks import reacher
+    from pilco.tasks.reacher import DAMAGED_REACHER, REACHER
 
-    args = reacher.parse_args(["--preset", "paper-code", "--cost-width", "0.5"], damaged=True)
+    args = DAMAGED_REACHER.parse(["--preset", "paper-code", "--cost-width", "0.5"])
     assert (args.planning_horizon, args.start_var, args.policy_iters, args.policy_iters_first,
             args.max_data) == (100, 0.1, 30, 60, 100)
     assert args.cost_width == 0.5  # a flag given wins over the preset
@@ -429,12 +403,12 @@ def test_the_reacher_paper_code_preset():
     # the published damaged-arm script: 25 steps of up to 0.3 rad
     assert (args.horizon, args.max_action, kw["max_action"]) == (25, 0.3, 0.3)
     assert args.policy_min_rel_improvement == 0.0  # no early stop, as the script
-    config = reacher.make_config(args, "damaged_reacher", damaged=True)
+    config = DAMAGED_REACHER.config(args)
     assert config.steps == 25 and config.env_kwargs["max_episode_steps"] == 25
-    paper = reacher.parse_args(["--preset", "paper-code"])  # one cost, as the paper's code
+    paper = REACHER.parse(["--preset", "paper-code"])  # one cost, as the paper's code
     assert (paper.cost_width, paper.fine_cost_width, paper.limit_cost) == (1.0, 0.0, 0.0)
     assert (paper.horizon, paper.max_action) == (50, 0.1)  # the healthy script's
-    healthy = reacher.parse_args([])
+    healthy = REACHER.parse([])
     assert healthy.preset is None
     assert reacher.env_kwargs(healthy, False)["joint_state"] == "measured"
 

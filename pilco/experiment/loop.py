@@ -51,7 +51,7 @@ class Experiment(RunRecord):
             ``config.env_id`` and ``config.env_kwargs``.
         distance_fn: ``(env, info) -> float``; default ``info["distance"]`` or
             ``info["tip_distance"]``.
-        args: the command-line settings, stored for ``--resume``.
+        settings: the task's settings as a JSON-ready dict, stored for ``--resume``.
         render_fn: ``Episode -> frames`` drawing the final episode after it ran (e.g. a
             replay in another process); the env then never renders during rollouts.
         after_model_fit: ``agent -> None`` called after every ``optimize_models``.
@@ -74,12 +74,12 @@ class Experiment(RunRecord):
                  build_agent: Callable[[Data, np.ndarray], Any],
                  make_env: Optional[Callable[[], Any]] = None,
                  distance_fn: Optional[Callable[[Any, dict], float]] = None,
-                 args: Optional[Dict[str, Any]] = None,
+                 settings: Optional[Dict[str, Any]] = None,
                  render_fn: Optional[Callable[[Episode], List[np.ndarray]]] = None,
                  after_model_fit: Optional[Callable[[Any], None]] = None,
                  before_policy_search: Optional[Callable[[Any, int], None]] = None,
                  success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None):
-        super().__init__(config, directory, args, success_fn)
+        super().__init__(config, directory, settings, success_fn)
         self.build_agent = build_agent
         self.distance_fn = distance_fn or distance_from_info
         self.render_fn = render_fn

@@ -37,11 +37,12 @@ class RunRecord:
     """
 
     def __init__(self, config: ExperimentConfig, directory: str,
-                 args: Optional[Dict[str, Any]] = None,
+                 settings: Optional[Dict[str, Any]] = None,
                  success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None):
         self.config = config
         self.store = RunStore(directory)
-        self.args = dict(args or {})
+        #: the task's settings (JSON-ready), saved for ``--resume``
+        self.settings = dict(settings or {})
         self.success_fn = success_fn
         self.agent = None
         self.episodes: List[Episode] = []

@@ -153,7 +153,7 @@ def progress_record(exp) -> Dict[str, Any]:
     done = min(len(exp.episodes), exp.store.saved_episodes)
     return {
         "config": dataclasses.asdict(exp.config),
-        "args": exp.args,
+        "settings": exp.settings,
         "episodes_done": done,
         "records": exp.records[:done],
         "seconds": exp.seconds,
