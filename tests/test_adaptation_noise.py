@@ -19,7 +19,7 @@ from pilco.controllers import LinearController
 from pilco.experiment import Experiment, ExperimentConfig
 from pilco.models import PILCO
 from pilco.rewards import ExponentialReward
-from pilco.tasks import adaptation
+from pilco.tasks import adaptation, adaptation_model
 from pilco.tasks.adaptation import ADAPTATION
 
 
@@ -92,7 +92,7 @@ def test_the_dimension_the_damage_changed_forgets_the_healthy_data(damaged_run):
     # before the choice: every output down-weights the healthy data alike
     np.testing.assert_array_equal(exp.agent.mgpr.noise_scales,
                                   np.r_[np.full(healthy, 100.0), np.ones(25)])
-    adaptation.per_output_noise(exp, args(), first=3)
+    adaptation_model.per_output_noise(exp, args(), first=3)
     z2 = exp.summary_fields["output_disagreement"]
     # the healthy model predicts the first coordinate moving by u; it stood still
     assert z2[0] > 1e3 and z2[1] < 10.0, z2
@@ -102,7 +102,7 @@ def test_the_dimension_the_damage_changed_forgets_the_healthy_data(damaged_run):
     np.testing.assert_array_equal(exp.agent.mgpr.noise_scales, want)  # [D, N]
     # chosen once: a later call (every damaged episode calls it) changes nothing
     exp.older_noise_scale = 7.0
-    adaptation.per_output_noise(exp, args(changed_output_noise=5.0), first=3)
+    adaptation_model.per_output_noise(exp, args(changed_output_noise=5.0), first=3)
     assert exp.older_noise_scale == 7.0
     # the stuck coordinate's model now predicts it standing still where the healthy
     # data said it moves
@@ -117,18 +117,18 @@ def test_the_dimension_the_damage_changed_forgets_the_healthy_data(damaged_run):
 def test_the_disagreement_is_about_one_where_the_model_knew_the_dynamics(damaged_run):
     exp = damaged_run
     healthy = [e.transitions() for e in exp.episodes[:2]]
-    z2 = adaptation.output_disagreement(exp.agent, healthy[0], healthy[1])
+    z2 = adaptation_model.output_disagreement(exp.agent, healthy[0], healthy[1])
     assert np.all(z2 < 10.0), z2
     # without the option, or before the damaged episode, nothing is chosen
     for a, first in ((args(changed_output_noise=None), 3), (args(), 4)):
-        adaptation.per_output_noise(exp, a, first=first)
+        adaptation_model.per_output_noise(exp, a, first=first)
         assert "output_disagreement" not in exp.summary_fields
         assert exp.older_noise_scale == 100.0
 
 
 def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
     exp = damaged_run
-    adaptation.per_output_noise(exp, args(), first=3)
+    adaptation_model.per_output_noise(exp, args(), first=3)
     exp.save_progress()
     agents = []
 
@@ -199,7 +199,7 @@ def test_the_disagreement_takes_a_noise_variance_on_its_floor(damaged_run):
     noise.unconstrained_variable.assign(-60.0)
     assert noise.numpy() == exp.agent.mgpr.noise_floor
     healthy = [e.transitions() for e in exp.episodes[:2]]
-    z2 = adaptation.output_disagreement(exp.agent, healthy[0], healthy[1])
+    z2 = adaptation_model.output_disagreement(exp.agent, healthy[0], healthy[1])
     assert np.all(np.isfinite(z2)) and z2.shape == (2,)
 
 
@@ -212,14 +212,14 @@ def stuck_args(**kw):
 def test_a_stuck_joint_is_no_longer_commanded(damaged_run):
     exp = damaged_run
     healthy = 50  # transitions of the two healthy episodes
-    ratios = adaptation.joint_follow_ratios(exp.episodes[:2], PlaneEnv.joint_dims)
+    ratios = adaptation_model.joint_follow_ratios(exp.episodes[:2], PlaneEnv.joint_dims)
     np.testing.assert_allclose(ratios, 1.0, rtol=1e-9)  # x' = x + u, no limits
     sent = exp.episodes[2].actions[:, 0].copy()
     assert np.all(sent != 0.0)
     for a in (stuck_args(stop_stuck_joints=False), stuck_args()):
-        adaptation.stop_stuck_joints(exp, a, first=4)  # before the first damaged episode
+        adaptation_model.stop_stuck_joints(exp, a, first=4)  # before the first damaged episode
         assert "stuck_joints" not in exp.summary_fields and exp.inert_actions == []
-    adaptation.stop_stuck_joints(exp, stuck_args(), first=3)
+    adaptation_model.stop_stuck_joints(exp, stuck_args(), first=3)
     fields = exp.summary_fields
     assert fields["stuck_joints"] == [0] and exp.inert_actions == [0]
     assert fields["joint_follow_ratio"][0] == 0.0
@@ -242,21 +242,21 @@ def test_a_stuck_joint_is_no_longer_commanded(damaged_run):
     assert abs(m[0, 0] - 0.3) < 0.03, m
     # found once: later calls (after every damaged episode) keep the choice
     exp.inert_actions = [0]
-    adaptation.stop_stuck_joints(exp, stuck_args(stuck_joint_ratio=2.0), first=3)
+    adaptation_model.stop_stuck_joints(exp, stuck_args(stuck_joint_ratio=2.0), first=3)
     assert fields["stuck_joints"] == [0]
 
 
 def test_a_healthy_joint_stays_commanded_and_the_flags_exclude_each_other(damaged_run):
     exp = damaged_run
-    ratios = adaptation.joint_follow_ratios(exp.episodes[2:], PlaneEnv.joint_dims)
+    ratios = adaptation_model.joint_follow_ratios(exp.episodes[2:], PlaneEnv.joint_dims)
     # a joint that never followed its commands on the healthy arm is not called stuck;
     # one that did in any healthy episode is (a joint may sit at a limit for a whole one)
-    assert adaptation.stuck_joints(exp.episodes[2:], exp.episodes[2:], 0.1,
+    assert adaptation_model.stuck_joints(exp.episodes[2:], exp.episodes[2:], 0.1,
                                    PlaneEnv.joint_dims) == []
     for healthy in (exp.episodes[:2], exp.episodes[1:]):
-        assert adaptation.stuck_joints(healthy, exp.episodes[2:], 0.1,
+        assert adaptation_model.stuck_joints(healthy, exp.episodes[2:], 0.1,
                                        PlaneEnv.joint_dims) == [0]
-    assert ratios[0] == 0.0 and np.isnan(adaptation.joint_follow_ratios(
+    assert ratios[0] == 0.0 and np.isnan(adaptation_model.joint_follow_ratios(
         [exp.episodes[2]], (1, 0))).sum() == 0
     out = ["--output", str(exp.directory) + "-x"]
     assert ADAPTATION.parse(out).stop_stuck_joints  # the default
@@ -273,11 +273,11 @@ def test_a_healthy_joint_stays_commanded_and_the_flags_exclude_each_other(damage
 
 def test_a_resumed_run_keeps_the_stuck_joint_stopped(damaged_run):
     exp = damaged_run
-    adaptation.stop_stuck_joints(exp, stuck_args(), first=3)
+    adaptation_model.stop_stuck_joints(exp, stuck_args(), first=3)
     exp.save()
     resumed = Experiment.resume(exp.directory, exp.config, build, make_env=PlaneEnv)
     assert resumed.inert_actions == [0] and resumed.inert_from_episode == 3
     np.testing.assert_array_equal(resumed.training_data()[0], exp.training_data()[0])
-    adaptation.stop_stuck_joints(resumed, stuck_args(), first=3)  # as adaptation.run does
+    adaptation_model.stop_stuck_joints(resumed, stuck_args(), first=3)  # as adaptation.run does
     np.testing.assert_array_equal(resumed.agent.controller.max_action, [0.0, 1.0])
     np.testing.assert_array_equal(resumed.agent.data[0], exp.agent.data[0])

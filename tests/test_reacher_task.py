@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from pilco.rewards import CombinedRewards, ExponentialReward
-from pilco.tasks import reacher
+from pilco.tasks import reacher, reacher_agent
 from pilco.tasks.adaptation import ADAPTATION
 from pilco.tasks.reacher import DAMAGED_REACHER, REACHER
 from pilco.tasks.settings import settings_to_dict
@@ -18,7 +18,7 @@ LIMITS = np.array([[-1.6056, 1.6056], [-1.221, 1.518], [-np.inf, np.inf], [-2.25
 
 
 def test_one_bump_per_finite_limit_on_its_joint():
-    bumps = reacher.limit_bumps(10, LIMITS, 0.1)
+    bumps = reacher_agent.limit_bumps(10, LIMITS, 0.1)
     centres = sorted(zip(bumps.dims, bumps.t.numpy()))
     expected = sorted((3 + j, v) for j in (0, 1, 3, 5) for v in LIMITS[j])
     assert [c[0] for c in centres] == [e[0] for e in expected]
@@ -26,14 +26,14 @@ def test_one_bump_per_finite_limit_on_its_joint():
     # each looks at one joint angle only, with width 0.1 rad and weight 1
     np.testing.assert_allclose(bumps.widths.numpy(), 0.1)
     np.testing.assert_allclose(bumps.coefs.numpy(), 1.0)
-    assert reacher.limit_bumps(10, np.full((7, 2), np.inf) * [-1, 1], 0.1) is None
+    assert reacher_agent.limit_bumps(10, np.full((7, 2), np.inf) * [-1, 1], 0.1) is None
 
 
 def test_the_bumps_lower_the_reward_near_a_limit_only():
     D = 10
     target = np.zeros((1, D))
     position = ExponentialReward(D, np.diag([1.0] * 3 + [0.0] * 7), target)
-    bumps = reacher.limit_bumps(D, LIMITS, 0.1)
+    bumps = reacher_agent.limit_bumps(D, LIMITS, 0.1)
     reward = CombinedRewards(D, [position, bumps], [1.0, -0.5])
     s = 1e-6 * np.eye(D)
 
@@ -91,7 +91,7 @@ def tiny_agent(argv):
     X, Y = rng.normal(size=(12, 17)), 0.01 * rng.normal(size=(12, 10))
     start = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
     args = REACHER.parse([*argv, "--basis-functions", "3"])
-    return reacher.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)((X, Y), start)
+    return reacher_agent.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)((X, Y), start)
 
 
 def test_the_default_agent_has_the_limit_bumps_and_the_paper_preset_not():
@@ -126,8 +126,8 @@ def test_the_schedule_widens_the_main_cost_and_start_variance_early_only():
     argv = ["--early-cost-width", "1.0", "--early-start-var", "0.1", "--early-episodes", "2"]
     agent = tiny_agent(argv)
     args = REACHER.parse([*argv, "--basis-functions", "3"])
-    hook = reacher.schedule(args)
-    main = reacher.main_position_reward(agent.reward)
+    hook = reacher_agent.schedule(args)
+    main = reacher_agent.main_position_reward(agent.reward)
     fine = agent.reward.base_rewards[0].base_rewards[1]
     far = np.concatenate([[1.2 + 0.5, 0.38, 0.38], np.zeros(7)])[None, :]
 
@@ -146,15 +146,13 @@ def test_the_schedule_widens_the_main_cost_and_start_variance_early_only():
     off = ["--early-start-var", "0"]
     plain = tiny_agent(off)
     before = plain.reward.base_rewards[0].base_rewards[0].W.numpy().copy(), plain.S_init
-    reacher.schedule(REACHER.parse(off))(plain, 2)
-    np.testing.assert_array_equal(reacher.main_position_reward(plain.reward).W.numpy(),
+    reacher_agent.schedule(REACHER.parse(off))(plain, 2)
+    np.testing.assert_array_equal(reacher_agent.main_position_reward(plain.reward).W.numpy(),
                                   before[0])
     np.testing.assert_array_equal(plain.S_init, before[1])
 
 
 def test_the_reacher_arms_widen_their_first_learned_start_by_default():
-    from pilco.tasks import adaptation
-
     healthy = REACHER.parse([])
     assert (healthy.early_start_var, healthy.early_cost_width, healthy.early_episodes) == (
         0.1, 0.0, 1)
@@ -169,7 +167,7 @@ def test_the_reacher_arms_widen_their_first_learned_start_by_default():
                   DAMAGED_REACHER.parse(["--preset", "paper-code"])):
         assert (other.early_start_var, other.policy_init_var) == (0.0, 0.0)
     agent = tiny_agent([])
-    hook = reacher.schedule(healthy)
+    hook = reacher_agent.schedule(healthy)
     hook(agent, 2)
     np.testing.assert_allclose(agent.S_init, 0.1 * np.eye(10))
     hook(agent, 3)
@@ -205,11 +203,11 @@ def test_the_adaptation_has_the_fine_cost_and_no_limit_bumps(tmp_path):
 
     args = ADAPTATION.parse(["--output", str(tmp_path / "new")])
     assert args.fine_cost_width == 0.05 and args.limit_cost == 0.0
-    agent = reacher.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
+    agent = reacher_agent.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
         (np.zeros((3, 17)), np.zeros((3, 10))), np.zeros((1, 10)))
     terms = agent.reward.base_rewards
     assert [type(t).__name__ for t in terms] == ["ExponentialReward"] * 2
-    np.testing.assert_allclose(terms[1].W.numpy(), reacher.position_weights(10, 0.05))
+    np.testing.assert_allclose(terms[1].W.numpy(), reacher_agent.position_weights(10, 0.05))
     assert ADAPTATION.parse(["--limit-cost", "0.1"]).limit_cost == 0.1
     # a run saved while the adaptation had no fine cost (null) resumes without it
     run = tmp_path / "old"
@@ -257,20 +255,20 @@ def test_the_adaptation_damages_the_arm_after_its_healthy_episodes(flags, reachi
 
 
 def test_the_damage_flag_gets_a_learnable_lengthscale_once_damaged_data_arrive():
-    from pilco.tasks import adaptation
+    from pilco.tasks import adaptation_model
 
     rng = np.random.default_rng(0)
     X, Y = rng.normal(size=(12, 18)), 0.01 * rng.normal(size=(12, 11))
     X[:, 10] = 0.0  # the flag: healthy transitions only
     args = REACHER.parse(["--basis-functions", "3"])
-    agent = reacher.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
+    agent = reacher_agent.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
         (X, Y), np.append(X[0, :10], 0.0)[None, :])
 
     def flag_lengthscales():
         return np.array([m.kernel.lengthscales.numpy()[10] for m in agent.mgpr.models])
 
     np.testing.assert_allclose(flag_lengthscales(), 100.0, rtol=1e-12)  # constant: ignored
-    adaptation.learn_the_flag(agent)
+    adaptation_model.learn_the_flag(agent)
     agent.set_data((X, Y))
     np.testing.assert_allclose(flag_lengthscales(), 100.0, rtol=1e-12)
     damaged = X.copy()
@@ -294,7 +292,7 @@ def test_the_adaptation_can_keep_only_the_main_cost_after_the_damage(which):
     healthy = ["--fine-cost-width", "0.05", "--limit-cost", "0.1"]
     args = ADAPTATION.parse([*healthy, "--damaged-cost", which])
     agent = tiny_agent(healthy)
-    combined, main = agent.reward, reacher.main_position_reward(agent.reward)
+    combined, main = agent.reward, reacher_agent.main_position_reward(agent.reward)
     before = agent.expected_return()
     exp = SimpleNamespace(agent=agent, episodes=[], episode_seed=lambda n: n,
                           make_env=lambda: make_env(FETCH_ID, reacher.env_kwargs(args, False)))
@@ -304,7 +302,7 @@ def test_the_adaptation_can_keep_only_the_main_cost_after_the_damage(which):
         assert agent.reward is combined
     else:
         assert agent.reward is main and type(main).__name__ == "ExponentialReward"
-        np.testing.assert_allclose(main.W.numpy(), reacher.position_weights(10, 0.2))
+        np.testing.assert_allclose(main.W.numpy(), reacher_agent.position_weights(10, 0.2))
         agent.m_init = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
         assert abs(agent.expected_return() - before) > 1e-6  # the objective changed
     assert ADAPTATION.parse([]).damaged_cost == "all"
@@ -319,8 +317,6 @@ def test_the_adaptation_restarts_its_policy_search_from_the_second_damaged_episo
     import argparse
 
     from test_hard_kill import AdaptationTask
-
-    from pilco.tasks import adaptation
 
     monkeypatch.setattr(os, "fsync", lambda fd: None)
     built = []
@@ -438,8 +434,6 @@ def test_a_drawn_target_comes_from_the_seed_and_stays_in_its_cube():
     np.testing.assert_allclose(near - [1.0, 0.5, 0.4], (drawn[3] - DEFAULT_TARGET) / 3,
                                atol=1e-15)
     # the damaged arm and the adaptation read the same flag
-    from pilco.tasks import adaptation
-
     damaged = DAMAGED_REACHER.parse(["--seed", "3", "--target-spread", "0.15"])
     np.testing.assert_array_equal(reacher.env_kwargs(damaged, True)["target"], drawn[3])
     adapting = ADAPTATION.parse(["--seed", "3", "--target-spread", "0.15"])
