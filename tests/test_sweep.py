@@ -299,16 +299,6 @@ def test_resume_refuses_a_directory_of_other_flags(tmp_path):
         runs.finished_summary(spec)
 
 
-def test_thread_environment():
-    env = runs.thread_environment(3, {"PATH": "/bin", "OMP_NUM_THREADS": "8"})
-    assert env["PATH"] == "/bin"
-    for name in runs.THREAD_VARIABLES:  # TensorFlow's ops one thread each, 3 side by side
-        assert env[name] == ("1" if name == "TF_NUM_INTRAOP_THREADS" else "3")
-    for bad in (0, 1.5, True):
-        with pytest.raises(ValueError, match="threads"):
-            runs.thread_environment(bad)
-
-
 # ----------------------------------------------------------------------------- figures
 def test_figures(tmp_path):
     d = [[1.0, 0.8, 0.5], [1.0, 0.5, 0.2, 0.1]]

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import math
 import os
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
+from ..runtime import configure_logging, configure_threads
 from .loop import Experiment
 from .report import format_episode_table, format_timing_table
 
@@ -198,16 +198,6 @@ def parse_task_args(parser: argparse.ArgumentParser,
     return args
 
 
-def configure_threads() -> None:
-    """One TensorFlow intra-op thread unless ``TF_NUM_INTRAOP_THREADS`` says otherwise (the
-    inter-op pool keeps its default, every CPU): the policy objective's groups of output
-    pairs (:func:`pilco.moments.pair_groups`) then run side by side, one per CPU, which
-    keeps the CPUs busier than TensorFlow's default of splitting each of these small
-    batched operations over them (timings: docs/performance.md). Takes effect in a
-    process that has not run a TensorFlow operation yet, as a task's does."""
-    os.environ.setdefault("TF_NUM_INTRAOP_THREADS", "1")
-
-
 def open_experiment(args: argparse.Namespace, config, build, **kwargs):
     """A new :class:`~pilco.experiment.Experiment` of ``config`` in ``args.output``, or
     the one saved there when ``args.resume`` is set; ``kwargs`` go to either."""
@@ -215,12 +205,6 @@ def open_experiment(args: argparse.Namespace, config, build, **kwargs):
     if args.resume:
         return Experiment.resume(args.output, config, build, **kwargs)
     return Experiment(config, args.output, build, **kwargs)
-
-
-def configure_logging(level: str) -> None:
-    """Basic logging to stderr for the example scripts (also quiets TensorFlow's C++)."""
-    logging.basicConfig(level=getattr(logging, str(level).upper(), logging.WARNING),
-                        format="%(asctime)s %(name)s %(levelname)s: %(message)s")
 
 
 def finish(exp, summary: Dict[str, Any], args: argparse.Namespace, title: str,
