@@ -21,7 +21,7 @@ from __future__ import annotations
 import importlib
 from typing import Callable, Optional, Sequence
 
-__all__ = ["TASKS", "task_main", "run_task"]
+__all__ = ["TASKS", "task_main", "run_task", "build_parser"]
 
 #: task name -> (module under pilco.tasks, keyword arguments of its ``main``)
 TASKS = {
@@ -45,3 +45,12 @@ def task_main(name: str) -> Callable[[Optional[Sequence[str]]], int]:
 def run_task(name: str, argv: Optional[Sequence[str]] = None) -> int:
     """Run task ``name`` with command-line flags ``argv``; returns its exit status."""
     return task_main(name)(argv)
+
+
+def build_parser(name: str):
+    """The argument parser of task ``name`` (its flags and defaults)."""
+    if name not in TASKS:
+        raise ValueError(f"unknown task {name!r}; choose one of {', '.join(TASKS)}")
+    module, kwargs = TASKS[name]
+    build = importlib.import_module(f"{__name__}.{module}").build_parser
+    return build(**kwargs)
