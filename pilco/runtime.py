@@ -1,6 +1,6 @@
 """Start-up of pilco's command-line entry points: TensorFlow's log lines, logging, threads.
 
-Every command (``python -m pilco.tasks``, ``python -m pilco.sweep``,
+Every command (``pilco``, ``python -m pilco.tasks``, ``python -m pilco.sweep``,
 ``python -m pilco.diagnose``) calls :func:`quiet_tensorflow` before anything imports
 TensorFlow, sets up logging with :func:`configure_logging` and the thread pools with
 :func:`configure_threads` (a process of its own) or :func:`thread_environment` (the
