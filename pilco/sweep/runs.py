@@ -5,10 +5,10 @@ A run is ``python -m pilco.tasks TASK --seed S --output RUN_DIR --quiet --no-ren
 ``cpus_per_run`` CPUs and limits TensorFlow's inter-op and the BLAS libraries' thread
 pools to as many threads (TensorFlow's intra-op pool to one, see
 :func:`pilco.runtime.thread_environment`), so ``C`` CPUs run ``C / cpus_per_run`` runs
-side by side without oversubscription. The Ray task returns the run's summary (and the tails of its output);
-the driver (:func:`execute`) writes ``summary.json`` and ``sweep-run.json`` into the run
-directory itself, so results reach the driver's disk even when the worker's file system
-is not shared.
+side by side without oversubscription. The Ray task returns the run's summary (and the
+tails of its output); the driver (:func:`execute`) writes ``summary.json`` and
+``sweep-run.json`` into the run directory itself, so results reach the driver's disk
+even when the worker's file system is not shared.
 
 A process that exits non-zero or leaves no complete summary raises :class:`RunFailed` in
 its Ray task, which Ray retries (``retry_exceptions``), as it retries a task whose worker
