@@ -21,8 +21,7 @@ import os
 import sys
 from typing import Optional, Sequence
 
-# TensorFlow's C++ log lines drown the report; pilco logs through `logging`.
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+from pilco.runtime import configure_logging, configure_threads, log_level, quiet_tensorflow
 
 __all__ = ["open_run", "build_parser", "main"]
 
@@ -77,19 +76,20 @@ def build_parser() -> argparse.ArgumentParser:
                         help="JSON file to write (default RUN_DIR/diagnosis.json)")
     parser.add_argument("--threads", type=int, default=0,
                         help="TensorFlow intra- and inter-op threads (0: TensorFlow's default)")
-    parser.add_argument("--log-level", default="INFO", help="logging level")
+    parser.add_argument("--log-level", default="INFO", type=log_level, help="logging level")
     return parser
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    args = build_parser().parse_args(argv)
-    logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.INFO),
-                        format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    # TensorFlow's C++ log lines drown the report; pilco logs through `logging`.
+    quiet_tensorflow()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.threads < 0:
+        parser.error(f"--threads must be 0 or more, got {args.threads}")
+    configure_logging(args.log_level)
     if args.threads:
-        import tensorflow as tf
-
-        tf.config.threading.set_intra_op_parallelism_threads(args.threads)
-        tf.config.threading.set_inter_op_parallelism_threads(args.threads)
+        configure_threads(args.threads)
     from .experiment.diagnose import diagnose, write_diagnosis
     from .experiment.report import format_diagnosis
 

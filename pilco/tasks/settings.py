@@ -55,6 +55,14 @@ positive_int = _number(int, lambda v: v >= 1, "at least 1")
 non_negative_int = _number(int, lambda v: v >= 0, "at least 0")
 
 
+def level_name(text: str) -> str:
+    """A logging level's name (any case) or number, kept as given; ValueError otherwise."""
+    from ..runtime import log_level
+
+    log_level(text)
+    return text
+
+
 def optional_float(text: str) -> Optional[float]:
     """A number, or ``None``/``none`` for "not set"."""
     if text.strip().lower() == "none":
@@ -122,7 +130,7 @@ class RunSettings:
     quiet: bool = setting(False, "no progress bars", group="experiment")
     no_render: bool = setting(False, "do not render the last episode", group="experiment")
     no_figures: bool = setting(False, "do not draw figures", group="experiment")
-    log_level: str = setting("WARNING", "logging level", group="experiment")
+    log_level: str = setting("WARNING", "logging level", kind=level_name, group="experiment")
     preset: Optional[str] = setting(None, "start from a named set of settings; flags given "
                                     "still win", kind=str, group="experiment")
     # -- learning
