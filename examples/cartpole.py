@@ -13,10 +13,11 @@ Usage::
     python examples/cartpole.py --seed 0
     python examples/cartpole.py --resume runs/cartpole-seed0 --episodes 12
 """
-import os
 import sys
 
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
+from pilco.runtime import quiet_tensorflow
+
+quiet_tensorflow()  # before TensorFlow loads: no C++ start-up lines, no CUDA probes on a CPU
 
 from pilco.tasks.cartpole import CARTPOLE as task  # noqa: E402
 

@@ -12,10 +12,11 @@ Usage::
 
     python examples/damaged_reacher.py --seed 0
 """
-import os
 import sys
 
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
+from pilco.runtime import quiet_tensorflow
+
+quiet_tensorflow()  # before TensorFlow loads: no C++ start-up lines, no CUDA probes on a CPU
 
 from pilco.tasks.reacher import DAMAGED_REACHER as task  # noqa: E402
 
