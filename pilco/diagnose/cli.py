@@ -1,63 +1,30 @@
-"""``python -m pilco.diagnose RUN_DIR [--episode K]``: why did a run fail?
+"""The command line ``python -m pilco.diagnose RUN_DIR [--episode K]``: reopen a run
+(:func:`pilco.diagnose.reopen.open_run`), diagnose learned episode K (default the last),
+print the report, write it to ``RUN_DIR/diagnosis.json`` (or ``--output``) and log the
+verdict.
 
-Reopens a run directory written by a task (``python -m pilco.tasks``, the examples, the
-seed sweep), diagnoses learned episode K (default the last) with
-:func:`pilco.experiment.diagnose.diagnose` (the checks and the verdict rules are in that
-module's docstring), prints the report, writes it to ``RUN_DIR/diagnosis.json`` and logs
-the verdict. Runs of the tasks ``reacher``, ``damaged_reacher``, ``cartpole``,
-``pendulum`` and ``adaptation`` are reopened through their task (its agent builder
-replays the learning of an earlier episode; the adaptation's replay redoes the damage's
-changes to the agent, :func:`pilco.tasks.adaptation.replay_damage`); other runs through
-their saved agent, which is enough for the last episode. Candidate policies run on the
-real system only where the run's environment can be made from its settings (not for the
-adaptation, whose arm breaks during the run).
+Candidate policies run on the real system only where the run's environment can be made
+from its settings (not for the adaptation, whose arm breaks during the run).
 """
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import os
-import sys
 from typing import Optional, Sequence
 
-# TensorFlow's C++ log lines drown the report; pilco logs through `logging`.
+# TensorFlow's C++ log lines drown the report; pilco logs through `logging`. Set before
+# anything imports TensorFlow: :func:`main` imports the diagnosis (and with it TensorFlow)
+# only after the thread settings.
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 
-__all__ = ["open_run", "build_parser", "main"]
+__all__ = ["build_parser", "main"]
 
 logger = logging.getLogger(__name__)
 
-#: tasks whose runs can be reopened with their agent builder
-REOPENABLE = ("reacher", "damaged_reacher", "cartpole", "pendulum", "adaptation")
-
-
-def open_run(directory: str):
-    """The run saved in ``directory`` as a resumed :class:`~pilco.experiment.Experiment`
-    (its episodes, records and settings; the agent builder when the task is known)."""
-    from .experiment import Experiment, ExperimentConfig, RunStore
-
-    progress = RunStore(directory).load_progress()
-    task = progress["config"]["task"]
-    argv = ["--resume", directory, "--quiet", "--no-render"]
-    level = logging.getLogger().level
-    try:
-        if task in ("reacher", "damaged_reacher"):
-            from .tasks import reacher
-
-            damaged = task == "damaged_reacher"
-            return reacher.make_experiment(reacher.parse_args(argv, damaged), task, damaged)
-        if task in REOPENABLE:
-            module = importlib.import_module(f"{__package__}.tasks.{task}")
-            return module.make_experiment(module.parse_args(argv))
-    finally:
-        logging.getLogger().setLevel(level)  # the task's parser sets the run's log level
-    logger.info("task %r is not reopened through its task: the saved agent is used", task)
-    return Experiment.resume(directory, ExperimentConfig(**progress["config"]),
-                             build_agent=None)
-
 
 def build_parser() -> argparse.ArgumentParser:
+    """The flags of ``python -m pilco.diagnose``."""
     parser = argparse.ArgumentParser(
         prog="python -m pilco.diagnose",
         description="Diagnose a learned episode of a PILCO run: model, optimiser or objective.",
@@ -82,6 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the command line on ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.INFO),
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s")
@@ -90,8 +58,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
         tf.config.threading.set_intra_op_parallelism_threads(args.threads)
         tf.config.threading.set_inter_op_parallelism_threads(args.threads)
-    from .experiment.diagnose import diagnose, write_diagnosis
-    from .experiment.report import format_diagnosis
+    from ..experiment.diagnose import diagnose, write_diagnosis
+    from ..experiment.report import format_diagnosis as format_report
+    from .reopen import open_run
 
     exp = open_run(args.run_dir)
     rollouts = not args.no_rollouts
@@ -105,10 +74,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     finally:
         exp.close()
     path = write_diagnosis(result, args.output or os.path.join(args.run_dir, "diagnosis.json"))
-    print(format_diagnosis(result))
+    print(format_report(result))
     print(f"\nWritten: {path}")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
