@@ -58,9 +58,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
         tf.config.threading.set_intra_op_parallelism_threads(args.threads)
         tf.config.threading.set_inter_op_parallelism_threads(args.threads)
-    from ..experiment.diagnose import diagnose, write_diagnosis
-    from ..experiment.report import format_diagnosis as format_report
+    from .diagnosis import diagnose, write_diagnosis
     from .reopen import open_run
+    from .report import format_report
 
     exp = open_run(args.run_dir)
     rollouts = not args.no_rollouts
