@@ -153,7 +153,7 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
     ``--stop-stuck-joints`` the second one no longer commands the stuck coordinate).
     Replaying the learning up to a damaged episode (the diagnosis of an earlier episode)
     gives the policy that ran it only with the task's replay hook."""
-    from pilco.experiment.reconstruct import action_error, replay_learning
+    from pilco.diagnose.replay import action_error, replay_learning
 
     cfg = ExperimentConfig(task="plane", env_id="unused", seed=2, episodes=4,
                            random_episodes=1, steps=8, random_action_scale=0.3,

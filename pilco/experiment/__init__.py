@@ -12,10 +12,7 @@ module             job
 ``store``          :class:`RunStore`, the files of a run directory
 ``signals``        SIGTERM as a stop at the next safe point
 ``progress``       progress bars and the optimisers' callback
-``report``         the timing and episode tables, the diagnosis report
-``diagnose``       why a learned episode failed: model, optimiser or objective
-``diagnostics``    the measurements of ``diagnose``
-``reconstruct``    the agent as it was when an episode ran (saved or replayed)
+``report``         the timing and episode tables
 =================  ==============================================================
 
 This package logs through :mod:`logging`; nothing here prints (the tasks print their tables).

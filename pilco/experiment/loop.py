@@ -64,8 +64,8 @@ class Experiment(RunRecord):
     those of :class:`~pilco.experiment.record.RunRecord`.
 
     ``before_replayed_episode``: ``(view, episode number) -> None`` or None; when the
-    run's learning is replayed (:func:`~pilco.experiment.reconstruct.replay_learning`,
-    e.g. by ``python -m pilco.diagnose``), called before each learned episode's model fit
+    run's learning is replayed (:func:`pilco.diagnose.replay.replay_learning`, e.g. by
+    ``python -m pilco.diagnose``), called before each learned episode's model fit
     with the replay's view, so that a task can redo what it changed in its agent during
     the run (the adaptation's damage).
     """

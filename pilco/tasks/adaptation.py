@@ -263,6 +263,7 @@ class AdaptationTask(reacher.ReacherTask):
     # the paper code's arm reports its commanded joint angles, in which no joint sticks
     presets = {"paper-code": dict(reacher.PAPER_CODE, stop_stuck_joints=False)}
     paper_seconds = None
+    system_from_settings = False  # the arm breaks during the run
 
     def check(self, s: AdaptationSettings) -> AdaptationSettings:
         if s.stop_stuck_joints and s.changed_output_noise is not None:

@@ -104,6 +104,9 @@ class Task:
             policy_warm_start=s.policy_warm_start, policy_iters_first=s.policy_iters_first,
             render=not s.no_render, predictions=not s.no_figures, quiet=s.quiet, **task)
 
+    #: False when the task changes its system during a run (the adaptation breaks its arm):
+    #: an env made from the settings is then not the system a late episode ran on
+    system_from_settings: ClassVar[bool] = True
     #: True when :meth:`render_fn` draws the final episode (the env then never renders)
     replays_frames: ClassVar[bool] = False
 
