@@ -22,19 +22,9 @@ from pilco.runtime import quiet_tensorflow
 
 quiet_tensorflow()  # before TensorFlow loads: no C++ start-up lines, no CUDA probes on a CPU
 
-from pilco.tasks.adaptation import ADAPTATION as task  # noqa: E402
-
-
-def main(argv=None) -> int:
-    # 1. settings (the reacher's, plus the damage and the episode budgets)
-    settings = task.parse(argv)
-    # 2. the task: the healthy Fetch arm and its agent
-    exp = task.experiment(settings)
-    # 3. PILCO on the healthy arm until it reaches, the damage, PILCO until it reaches again
-    summary = task.run(exp, settings)
-    # 4. report: tables, when the damage came and how many episodes recovery took
-    return task.finish(exp, summary, settings)
-
+from pilco.tasks.adaptation import ADAPTATION  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # the four steps of examples/reacher.py (parse, experiment, run, finish) in one call:
+    # PILCO on the healthy arm until it reaches, the damage, PILCO until it reaches again
+    sys.exit(ADAPTATION.main())

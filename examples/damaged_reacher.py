@@ -18,19 +18,9 @@ from pilco.runtime import quiet_tensorflow
 
 quiet_tensorflow()  # before TensorFlow loads: no C++ start-up lines, no CUDA probes on a CPU
 
-from pilco.tasks.reacher import DAMAGED_REACHER as task  # noqa: E402
-
-
-def main(argv=None) -> int:
-    # 1. settings (the paper's defaults, the damage; --resume DIR continues a saved run)
-    settings = task.parse(argv)
-    # 2. the task: the damaged Fetch arm, RBF policy, GP dynamics, cost on the gripper
-    exp = task.experiment(settings)
-    # 3. PILCO: a random episode, then per episode: train GPs, optimise policy, apply it
-    summary = task.run(exp, settings)
-    # 4. report: tables, figures, the final episode as a GIF (exit 130 after Ctrl-C)
-    return task.finish(exp, summary, settings)
-
+from pilco.tasks.reacher import DAMAGED_REACHER  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # the four steps of examples/reacher.py (parse, experiment, run, finish) in one call:
+    # the damaged Fetch arm, RBF policy, GP dynamics, cost on the gripper
+    sys.exit(DAMAGED_REACHER.main())

@@ -32,19 +32,30 @@ def _task_names() -> List[str]:
     return list(TASKS)
 
 
+def _pick(argv: List[str], choices: Sequence[str], usage: str, prog: str,
+          what: str) -> Optional[int]:
+    """The exit status when ``argv`` does not start with one of ``choices``: 0 after
+    printing ``usage`` for ``-h``/``--help``, 2 after a usage error naming the missing or
+    unknown ``what``; None when it does."""
+    if argv and argv[0] in ("-h", "--help"):
+        sys.stdout.write(usage)
+        return 0
+    if not argv or argv[0] not in choices:
+        problem = f"no {what} given" if not argv else f"unknown {what} {argv[0]!r}"
+        sys.stderr.write(f"{usage.splitlines()[0]}\n{prog}: error: {problem}; choose one "
+                         f"of {', '.join(choices)} (see {prog} --help)\n")
+        return 2
+    return None
+
+
 def _run(argv: List[str]) -> int:
     names = _task_names()
     usage = (f"usage: {PROG} run TASK [task flags]\n"
              f"       {PROG} run TASK --help   (the task's flags)\n"
              f"tasks: {', '.join(names)}\n")
-    if argv and argv[0] in ("-h", "--help"):
-        sys.stdout.write(usage)
-        return 0
-    if not argv or argv[0] not in names:
-        problem = "no task given" if not argv else f"unknown task {argv[0]!r}"
-        sys.stderr.write(f"usage: {PROG} run TASK [task flags]\n{PROG} run: error: "
-                         f"{problem}; choose one of {', '.join(names)}\n")
-        return 2
+    status = _pick(argv, names, usage, f"{PROG} run", "task")
+    if status is not None:
+        return status
     from .tasks import run_task
 
     return run_task(argv[0], argv[1:])
@@ -104,14 +115,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     command."""
     quiet_tensorflow()
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] in ("-h", "--help"):
-        sys.stdout.write(usage())
-        return 0
-    if not argv or argv[0] not in COMMANDS:
-        problem = "no command given" if not argv else f"unknown command {argv[0]!r}"
-        sys.stderr.write(f"usage: {PROG} COMMAND [arguments]\n{PROG}: error: {problem}; "
-                         f"choose one of {', '.join(COMMANDS)} (see {PROG} --help)\n")
-        return 2
+    status = _pick(argv, list(COMMANDS), usage(), PROG, "command")
+    if status is not None:
+        return status
     command, _, _ = COMMANDS[argv[0]]
     return command(argv[1:])
 
