@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from pilco.controllers import LinearController
-from pilco.experiment import Experiment, ExperimentConfig
+from pilco.experiment import Experiment, ExperimentConfig, stack_transitions
 from pilco.models import PILCO
 from pilco.rewards import ExponentialReward
 from pilco.tasks import adaptation, adaptation_model
@@ -72,13 +72,14 @@ def damaged_run(tmp_path):
     cfg = ExperimentConfig(task="plane", env_id="unused", seed=1, episodes=4,
                            random_episodes=2, steps=25, random_action_scale=0.3,
                            predictions=False, quiet=True, render=False)
-    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv)
+    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
+                     model_data=adaptation_model.damaged_arm_data)
     PlaneEnv.broken = False
     try:
         exp.run_random_episode()
         exp.run_random_episode()
         exp.agent.optimize_models(maxiter=200)
-        exp.older_noise_scale, exp.older_before_episode = 100.0, 3  # as adaptation.run
+        exp.task_state.update(older_noise_scale=100.0, older_before_episode=3)  # as run
         PlaneEnv.broken = True
         exp.run_random_episode()  # the first damaged episode (random here)
     finally:
@@ -96,17 +97,17 @@ def test_the_dimension_the_damage_changed_forgets_the_healthy_data(damaged_run):
     z2 = exp.summary_fields["output_disagreement"]
     # the healthy model predicts the first coordinate moving by u; it stood still
     assert z2[0] > 1e3 and z2[1] < 10.0, z2
-    assert exp.older_noise_scale == [1e6, 100.0]
+    assert exp.task_state["older_noise_scale"] == [1e6, 100.0]
     want = np.stack([np.r_[np.full(healthy, 1e6), np.ones(25)],
                      np.r_[np.full(healthy, 100.0), np.ones(25)]])
     np.testing.assert_array_equal(exp.agent.mgpr.noise_scales, want)  # [D, N]
     # chosen once: a later call (every damaged episode calls it) changes nothing
-    exp.older_noise_scale = 7.0
+    exp.task_state["older_noise_scale"] = 7.0
     adaptation_model.per_output_noise(exp, args(changed_output_noise=5.0), first=3)
-    assert exp.older_noise_scale == 7.0
+    assert exp.task_state["older_noise_scale"] == 7.0
     # the stuck coordinate's model now predicts it standing still where the healthy
     # data said it moves
-    exp.older_noise_scale = [1e6, 100.0]
+    exp.task_state["older_noise_scale"] = [1e6, 100.0]
     exp.give_agent_data(exp.agent)
     exp.agent.optimize_models(maxiter=200)
     X = np.array([[0.0, 0.0, 0.3, 0.3]])
@@ -123,7 +124,7 @@ def test_the_disagreement_is_about_one_where_the_model_knew_the_dynamics(damaged
     for a, first in ((args(changed_output_noise=None), 3), (args(), 4)):
         adaptation_model.per_output_noise(exp, a, first=first)
         assert "output_disagreement" not in exp.summary_fields
-        assert exp.older_noise_scale == 100.0
+        assert exp.task_state["older_noise_scale"] == 100.0
 
 
 def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
@@ -136,8 +137,9 @@ def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
         agents.append(build(data, start_states))
         return agents[-1]
 
-    resumed = Experiment.resume(exp.directory, exp.config, rebuild, make_env=PlaneEnv)
-    assert resumed.older_noise_scale == [1e6, 100.0]
+    resumed = Experiment.resume(exp.directory, exp.config, rebuild, make_env=PlaneEnv,
+                                model_data=adaptation_model.damaged_arm_data)
+    assert resumed.task_state["older_noise_scale"] == [1e6, 100.0]
     np.testing.assert_array_equal(resumed.agent.mgpr.noise_scales,
                                   exp.agent.mgpr.noise_scales)
     assert resumed.summary_fields["output_disagreement"] == \
@@ -165,7 +167,8 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
         min_healthy_episodes=1, damaged_cost="all", damage_input=False,
         old_data_noise=100.0, damaged_policy_restarts=restarts, changed_output_noise=None,
         changed_output_threshold=10.0, stop_stuck_joints=stop, stuck_joint_ratio=0.1)
-    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv)
+    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
+                     model_data=adaptation_model.damaged_arm_data)
     exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None}
     exp.before_replayed_episode = adaptation.replay_damage(exp, run_args)
     PlaneEnv.broken = False
@@ -176,7 +179,7 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
     assert summary["damage_at_episode"] == 3 and len(exp.episodes) == 4
     np.testing.assert_array_equal(exp.agent.m_init, [[0.3, -0.2]])
     if stop:
-        assert summary["stuck_joints"] == [0] and exp.inert_actions == [0]
+        assert summary["stuck_joints"] == [0] and exp.task_state["inert_actions"] == [0]
         assert np.all(exp.episodes[2].actions[:, 0] != 0.0)  # sent, with no effect
         np.testing.assert_array_equal(exp.episodes[3].actions[:, 0], 0.0)  # not sent
     else:
@@ -218,10 +221,11 @@ def test_a_stuck_joint_is_no_longer_commanded(damaged_run):
     assert np.all(sent != 0.0)
     for a in (stuck_args(stop_stuck_joints=False), stuck_args()):
         adaptation_model.stop_stuck_joints(exp, a, first=4)  # before the first damaged episode
-        assert "stuck_joints" not in exp.summary_fields and exp.inert_actions == []
+        assert "stuck_joints" not in exp.summary_fields
+        assert exp.task_state["inert_actions"] == []
     adaptation_model.stop_stuck_joints(exp, stuck_args(), first=3)
     fields = exp.summary_fields
-    assert fields["stuck_joints"] == [0] and exp.inert_actions == [0]
+    assert fields["stuck_joints"] == [0] and exp.task_state["inert_actions"] == [0]
     assert fields["joint_follow_ratio"][0] == 0.0
     assert fields["joint_follow_ratio"][1] == pytest.approx(1.0)
     agent = exp.agent
@@ -241,7 +245,7 @@ def test_a_stuck_joint_is_no_longer_commanded(damaged_run):
     m, _, _ = agent.predict(np.array([[0.3, -0.2]]), 0.01 * np.eye(2), 3)
     assert abs(m[0, 0] - 0.3) < 0.03, m
     # found once: later calls (after every damaged episode) keep the choice
-    exp.inert_actions = [0]
+    exp.task_state["inert_actions"] = [0]
     adaptation_model.stop_stuck_joints(exp, stuck_args(stuck_joint_ratio=2.0), first=3)
     assert fields["stuck_joints"] == [0]
 
@@ -275,9 +279,57 @@ def test_a_resumed_run_keeps_the_stuck_joint_stopped(damaged_run):
     exp = damaged_run
     adaptation_model.stop_stuck_joints(exp, stuck_args(), first=3)
     exp.save()
-    resumed = Experiment.resume(exp.directory, exp.config, build, make_env=PlaneEnv)
-    assert resumed.inert_actions == [0] and resumed.inert_from_episode == 3
+    resumed = Experiment.resume(exp.directory, exp.config, build, make_env=PlaneEnv,
+                                model_data=adaptation_model.damaged_arm_data)
+    assert (resumed.task_state["inert_actions"], resumed.task_state["inert_from_episode"]) == (
+        [0], 3)
     np.testing.assert_array_equal(resumed.training_data()[0], exp.training_data()[0])
     adaptation_model.stop_stuck_joints(resumed, stuck_args(), first=3)  # as adaptation.run does
     np.testing.assert_array_equal(resumed.agent.controller.max_action, [0.0, 1.0])
     np.testing.assert_array_equal(resumed.agent.data[0], exp.agent.data[0])
+
+
+def _episode(steps, start):
+    from pilco.experiment import Episode
+
+    states = start + np.arange(steps + 1, dtype=float)[:, None] * np.ones((1, 2))
+    return Episode(states=states, actions=np.full((steps, 2), 0.5), rewards=np.zeros(steps),
+                   distances=np.zeros(steps + 1))
+
+
+@pytest.mark.parametrize("train_from, max_data", [(1, None), (2, None), (1, 9)])
+def test_older_episodes_are_down_weighted_against_newer_ones_only(train_from, max_data):
+    """The adaptation's choice of model data: from ``train_from_episode`` on, the first
+    ``max_data``; the episodes before ``older_before_episode`` (the healthy arm's) get
+    ``older_noise_scale``, unless no later transition is among them."""
+    from types import SimpleNamespace
+
+    episodes = [_episode(4, 0.0), _episode(3, 10.0)]
+    record = SimpleNamespace(episodes=episodes, config=SimpleNamespace(max_data=max_data),
+                             task_state=dict(older_noise_scale=50.0, older_before_episode=3,
+                                             train_from_episode=train_from))
+    old = [e.steps for e in episodes][train_from - 1:]
+    X, Y, scales = adaptation_model.damaged_arm_data(record)
+    # no transition of episode 3 or later yet: nothing to weigh against, all ones
+    np.testing.assert_array_equal(scales, np.ones(len(X)))
+    assert len(X) == min(sum(old), max_data or 99)
+    episodes.append(_episode(2, 20.0))
+    X, Y, scales = adaptation_model.damaged_arm_data(record)
+    want = np.r_[np.full(sum(old), 50.0), np.ones(2)][:max_data]
+    if not np.any(want == 1.0):  # max_data keeps old transitions only
+        want = np.ones_like(want)
+    np.testing.assert_array_equal(scales, want)
+    assert len(X) == len(Y) == len(want)
+    np.testing.assert_array_equal(X[0], stack_transitions(episodes[train_from - 1:])[0][0])
+    # one factor per output dimension: [D, N]
+    record.task_state["older_noise_scale"] = [50.0, 2.0]
+    scales = adaptation_model.damaged_arm_data(record)[2]
+    assert scales.shape == (2, len(want))
+    # inert actions read as 0 from their episode on; the episodes keep what was sent
+    record.task_state.update(inert_actions=[1], inert_from_episode=3)
+    X, _, _ = adaptation_model.damaged_arm_data(record)
+    n = len(X)
+    if max_data is None:
+        np.testing.assert_array_equal(X[-2:, 2 + 1], 0.0)
+        np.testing.assert_array_equal(X[:n - 2, 2 + 1], 0.5)
+    assert np.all(episodes[2].actions == 0.5)

@@ -59,6 +59,9 @@ class Experiment(RunRecord):
             ``optimize_policy`` (e.g. a reward that changes with the episode).
         success_fn: ``summary -> bool``, the task's success rule written to the summary
             as ``"success"`` (default: ``summary["solved"]``).
+        model_data: the task's choice of the model's transitions and their noise factors
+            (:attr:`~pilco.experiment.record.RunRecord.model_data`; default every
+            episode's, factors 1), also for the agent of a resumed run.
 
     The collected episodes, records, timings, task state, saving and the summary are
     those of :class:`~pilco.experiment.record.RunRecord`.
@@ -78,8 +81,11 @@ class Experiment(RunRecord):
                  render_fn: Optional[Callable[[Episode], List[np.ndarray]]] = None,
                  after_model_fit: Optional[Callable[[Any], None]] = None,
                  before_policy_search: Optional[Callable[[Any, int], None]] = None,
-                 success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None):
+                 success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None,
+                 model_data: Optional[Callable[[Any], Tuple[np.ndarray, np.ndarray,
+                                                            Optional[np.ndarray]]]] = None):
         super().__init__(config, directory, settings, success_fn)
+        self.model_data = model_data
         self.build_agent = build_agent
         self.distance_fn = distance_fn or distance_from_info
         self.render_fn = render_fn

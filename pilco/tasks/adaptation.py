@@ -39,8 +39,8 @@ from typing import Any, Dict, List, Optional
 
 from ..experiment import Experiment
 from . import reacher, reacher_agent
-from .adaptation_model import (_stop_commanding, learn_the_flag, per_output_noise,
-                               stop_stuck_joints)
+from .adaptation_model import (_stop_commanding, damaged_arm_data, learn_the_flag,
+                               per_output_noise, stop_stuck_joints, track_damage_data)
 from .settings import non_negative_int, positive_float, positive_int, setting, task_settings
 
 __all__ = ["AdaptationSettings", "AdaptationTask", "ADAPTATION", "damage", "replay_damage",
@@ -147,8 +147,9 @@ def replay_damage(exp: Experiment, s: AdaptationSettings):
 
     def before(view, episode: int) -> None:
         first = exp.summary_fields.get("damage_at_episode")
-        if first is not None and episode > first and exp.inert_actions:
-            _stop_commanding(view.agent, exp.inert_actions)  # --stop-stuck-joints
+        inert = exp.task_state.get("inert_actions")
+        if first is not None and episode > first and inert:
+            _stop_commanding(view.agent, inert)  # --stop-stuck-joints
         if first is None or episode != first:
             return
         agent = view.agent
@@ -219,7 +220,7 @@ def run_healthy(exp: Experiment, s: AdaptationSettings) -> None:
 def run(exp: Experiment, s: AdaptationSettings) -> Dict[str, Any]:
     """Healthy episodes until one reaches, the damage, damaged episodes until the arm
     reaches again (or their budget is spent); resumable at any episode."""
-    fields = exp.summary_fields
+    fields, state = exp.summary_fields, track_damage_data(exp)
     exp.complete = False
     with exp.session():
         while len(exp.episodes) < s.random_episodes:
@@ -229,9 +230,9 @@ def run(exp: Experiment, s: AdaptationSettings) -> Dict[str, Any]:
             damage(exp, s)
             fields["damage_at_episode"] = len(exp.episodes) + 1
             if s.drop_old_data:
-                exp.train_from_episode = fields["damage_at_episode"]
-            exp.older_noise_scale = s.old_data_noise
-            exp.older_before_episode = fields["damage_at_episode"]
+                state["train_from_episode"] = fields["damage_at_episode"]
+            state["older_noise_scale"] = s.old_data_noise
+            state["older_before_episode"] = fields["damage_at_episode"]
             exp.save_progress()
         else:
             damage(exp, s)  # resuming after the damage: break the fresh env again
@@ -287,13 +288,15 @@ class AdaptationTask(reacher.ReacherTask):
         return env
 
     def hooks(self, s: AdaptationSettings, env) -> Dict[str, Any]:
-        return dict(super().hooks(s, env), success_fn=recovered_within(RECOVER_WITHIN))
+        return dict(super().hooks(s, env), success_fn=recovered_within(RECOVER_WITHIN),
+                    model_data=damaged_arm_data)
 
     def prepare(self, exp: Experiment, s: AdaptationSettings) -> None:
         """The adaptation's summary fields, and the damage redone by a replay."""
         super().prepare(exp, s)
         exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None,
                               **exp.summary_fields}
+        track_damage_data(exp)
         exp.before_replayed_episode = replay_damage(exp, s)
 
     def run(self, exp: Experiment, s: AdaptationSettings) -> Dict[str, Any]:

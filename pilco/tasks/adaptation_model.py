@@ -15,10 +15,61 @@ from ..experiment import Experiment, stack_transitions
 if TYPE_CHECKING:  # the settings class lives with the task, which imports this module
     from .adaptation import AdaptationSettings
 
-__all__ = ["learn_the_flag", "output_disagreement", "per_output_noise", "joint_follow_ratios",
+__all__ = ["DATA_STATE", "track_damage_data", "damaged_arm_data", "learn_the_flag", "output_disagreement", "per_output_noise", "joint_follow_ratios",
            "stuck_joints", "stop_stuck_joints", "HEALTHY_FOLLOW_RATIO"]
 
 logger = logging.getLogger(__name__)
+
+#: the adaptation's data state (in the run's ``task_state``), as before the damage:
+#: ``train_from_episode`` (1-based: the model learns from this episode on),
+#: ``older_noise_scale`` and ``older_before_episode`` (the transitions of episodes before
+#: ``older_before_episode`` have their noise variance multiplied by ``older_noise_scale``:
+#: a large factor down-weights the healthy arm's after the damage; a list gives each state
+#: dimension's GP its own factor), ``inert_actions`` and ``inert_from_episode`` (action
+#: dimensions that have no effect from that episode on, a stuck joint's command: the model
+#: sees them as 0 there, their effective value; the episodes keep what was sent)
+DATA_STATE = dict(train_from_episode=1, older_noise_scale=1.0, older_before_episode=1,
+                  inert_actions=[], inert_from_episode=1)
+
+
+def track_damage_data(exp) -> dict:
+    """Give the run ``exp`` the adaptation's data state (its ``task_state``, with the
+    :data:`DATA_STATE` defaults for keys it lacks) and :func:`damaged_arm_data` as the
+    choice of its model's transitions; returns the state."""
+    for key, value in DATA_STATE.items():
+        exp.task_state.setdefault(key, list(value) if isinstance(value, list) else value)
+    exp.model_data = damaged_arm_data
+    return exp.task_state
+
+
+def damaged_arm_data(record):
+    """The adaptation's model transitions (``RunRecord.model_data``): the episodes from
+    ``train_from_episode`` on (at least the last one), the inert actions at 0 from
+    ``inert_from_episode`` on, the first ``max_data``; their noise factors are
+    ``older_noise_scale`` for the episodes before ``older_before_episode``, else 1, and
+    all 1 while no later transition is among them (older data are down-weighted against
+    newer ones only: scaling every noise variance alike would only change the fit).
+    Returns ``(X [N, D+U], Y [N, D], factors [N] or [D, N])``."""
+    state = {**DATA_STATE, **record.task_state}
+    first = min(int(state["train_from_episode"]), len(record.episodes))
+    numbered = list(enumerate(record.episodes[first - 1:], start=first))
+    X, Y = stack_transitions([e for _, e in numbered])
+    if not numbered:
+        return X, Y, None
+    inert = [int(a) for a in state["inert_actions"]]
+    if inert and len(X):
+        rows = np.concatenate([np.full(e.steps, n >= int(state["inert_from_episode"]))
+                               for n, e in numbered])
+        X[np.ix_(rows, Y.shape[1] + np.asarray(inert, dtype=int))] = 0.0  # X is new
+    old = np.concatenate([np.full(e.steps, n < int(state["older_before_episode"]))
+                          for n, e in numbered])
+    cap = record.config.max_data
+    if cap is not None:
+        X, Y, old = X[:cap], Y[:cap], old[:cap]
+    if np.all(old):
+        old = np.zeros_like(old)
+    older = np.asarray(state["older_noise_scale"], dtype=float)
+    return X, Y, np.where(old, older[..., None] if older.ndim else older, 1.0)
 
 #: a joint whose rotations summed to less than this share of its commanded ones in every
 #: healthy episode never followed its commands there either (e.g. held at a limit)
@@ -80,7 +131,8 @@ def per_output_noise(exp: Experiment, s: AdaptationSettings, first: int) -> None
     if (s.changed_output_noise is None or len(exp.episodes) < first
             or fields.get("output_disagreement") is not None):
         return
-    known = stack_transitions(exp.episodes[exp.train_from_episode - 1:first - 1])
+    state = track_damage_data(exp)
+    known = stack_transitions(exp.episodes[state["train_from_episode"] - 1:first - 1])
     if exp.config.max_data is not None:
         known = tuple(a[: exp.config.max_data] for a in known)
     if len(known[0]) == 0:  # --drop-old-data: no healthy transition to weigh
@@ -88,8 +140,8 @@ def per_output_noise(exp: Experiment, s: AdaptationSettings, first: int) -> None
     z2 = output_disagreement(exp.agent, known, exp.episodes[first - 1].transitions())
     changed = z2 > s.changed_output_threshold
     fields["output_disagreement"] = [float(v) for v in z2]
-    exp.older_noise_scale = [float(s.changed_output_noise if c else s.old_data_noise)
-                             for c in changed]
+    state["older_noise_scale"] = [float(s.changed_output_noise if c else s.old_data_noise)
+                                  for c in changed]
     exp.give_agent_data(exp.agent)
     logger.info("the healthy model on the first damaged episode: mean squared standardised "
                 "error per state dimension %s; changed by the damage: %s", np.round(z2, 2),
@@ -139,13 +191,13 @@ def stop_stuck_joints(exp: Experiment, s: AdaptationSettings, first: int) -> Non
     """With ``--stop-stuck-joints``, once the first damaged episode (``first``) ran and
     before the model learns from it: the joints :func:`stuck_joints` finds are no longer
     commanded (action bound 0), the model sees their commands in the damaged episodes as 0
-    (``exp.inert_actions`` from episode ``first``), and the healthy arm's transitions count
+    (the data state's ``inert_actions`` from episode ``first``), and the healthy arm's transitions count
     as equals again (noise factor 1): with the stuck joints' commands at 0 they describe the
     damaged arm. The env's ``joint_dims`` say which state dimension holds each action's
     joint. The summary holds ``joint_follow_ratio`` (first damaged episode, per action) and
     ``stuck_joints`` (action indices; the Fetch arm's elbow is 3). Applied again on resume
     (the saved agent keeps its bounds)."""
-    fields = exp.summary_fields
+    fields, state = exp.summary_fields, track_damage_data(exp)
     if not s.stop_stuck_joints or len(exp.episodes) < first:
         return
     if fields.get("stuck_joints") is None:
@@ -158,8 +210,8 @@ def stop_stuck_joints(exp: Experiment, s: AdaptationSettings, first: int) -> Non
         logger.info("joints' measured over commanded rotation in the first damaged episode "
                     "%s; stuck (action indices): %s", np.round(ratios, 3), joints or "none")
         if joints:
-            exp.inert_actions, exp.inert_from_episode = joints, first
-            exp.older_noise_scale = 1.0
+            state.update(inert_actions=joints, inert_from_episode=first,
+                         older_noise_scale=1.0)
             exp.give_agent_data(exp.agent)
-    if exp.inert_actions:
-        _stop_commanding(exp.agent, exp.inert_actions)
+    if state["inert_actions"]:
+        _stop_commanding(exp.agent, state["inert_actions"])
