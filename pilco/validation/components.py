@@ -1,4 +1,4 @@
-"""The objects given to the agent: controllers, rewards, squash functions.
+"""The objects and functions given to the agent: controllers, rewards, squash functions.
 
 A controller or reward is accepted when it follows its protocol
 (:mod:`pilco.protocols`), whatever its class; the check also matches its dimensions with
@@ -10,7 +10,8 @@ from typing import Optional, Sequence
 
 from ..protocols import Controller, Reward
 
-__all__ = ["check_squash", "check_reward", "check_reward_list", "check_controller"]
+__all__ = ["check_squash", "check_callable", "check_reward", "check_reward_list",
+           "check_controller"]
 
 
 def check_squash(squash):
@@ -21,6 +22,13 @@ def check_squash(squash):
             f"{squash!r}"
         )
     return squash
+
+
+def check_callable(value, name: str):
+    """A function (any callable) or None, or a clear error."""
+    if value is not None and not callable(value):
+        raise TypeError(f"{name} must be callable, got {type(value).__name__}")
+    return value
 
 
 def _missing(obj, members: Sequence[str]) -> list:
