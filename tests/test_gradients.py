@@ -21,6 +21,7 @@ import tensorflow as tf
 from pilco import moments
 from pilco.controllers import LinearController, RbfController, squash_sat, squash_sin
 from pilco.models import MGPR, PILCO
+from pilco.moments import pairs as moment_pairs
 from pilco.rewards import ExponentialReward
 
 H_FD = 1e-5
@@ -240,7 +241,7 @@ def test_grouped_pair_block_equals_one_group(monkeypatch, groups):
     w = [rng.standard_normal(shape) for shape in ((1, 5), (5, 5), (3, 5))]
     results = []
     for threads in (1, groups):
-        monkeypatch.setattr(moments, "_parallel_threads", lambda: threads)
+        monkeypatch.setattr(moment_pairs, "_parallel_threads", lambda: threads)
         assert len(moments.pair_groups(15, 5)) == threads
         m, s = tf.Variable(M_IN), tf.Variable(S_IN)
         with tf.GradientTape() as tape:

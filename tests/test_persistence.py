@@ -1,4 +1,5 @@
-"""Saving and loading agents (pilco.persistence): exact round trips, atomic writes, errors."""
+"""Saving and loading agents (PILCO.save, PILCO.load): exact round trips, atomic writes,
+errors."""
 import json
 import os
 import subprocess
@@ -10,7 +11,6 @@ import gpflow
 import numpy as np
 import pytest
 
-from pilco import persistence
 from pilco.controllers import LinearController, RbfController, squash_sat, squash_sin
 from pilco.models import MGPR, PILCO, SMGPR
 from pilco.rewards import (AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward,
@@ -105,8 +105,8 @@ def test_round_trip_in_a_fresh_process_is_exact(tmp_path):
 def test_load_restores_every_setting_and_parameter(tmp_path):
     for agent in (rbf_agent(), sparse_agent()):
         path = tmp_path / "agent.npz"
-        persistence.save_agent(agent, path)
-        back = persistence.load_agent(path)
+        agent.save(path)
+        back = PILCO.load(path)
         assert type(back.controller) is type(agent.controller)
         assert type(back.mgpr) is type(agent.mgpr)
         assert back.controller.squash is agent.controller.squash

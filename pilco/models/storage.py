@@ -6,9 +6,16 @@ The layout of agent files (``format: "pilco-agent"``) and policy files
 under the key ``__meta__``. Every trainable quantity is stored twice: its value and its
 raw, unconstrained variable, so a reloaded agent computes bit-identical predictions.
 
+There is one way to save an agent: ``agent.save(path)`` and ``PILCO.load(path)``
+(:class:`pilco.models.PILCO`), which the run directory's ``agent.npz`` uses
+(:class:`pilco.experiment.RunStore`); :func:`save_agent` and :func:`load_agent` are the
+bodies of those methods. A policy file is a different thing: the policy alone, evaluated
+on a robot with NumPy by :func:`pilco.deploy.load_policy`; ``agent.export_policy(path)``
+writes it, and :func:`export_policy` also writes one for a controller used without an
+agent.
+
 This module works on the public attributes of the components (controllers, rewards,
-dynamics models) and of the agent; :class:`pilco.models.PILCO` uses it for ``save``,
-``load`` and ``export_policy``, and :mod:`pilco.persistence` is the functional front end.
+dynamics models) and of the agent.
 """
 from __future__ import annotations
 
@@ -307,8 +314,18 @@ def _deterministic_jitter() -> float:
 
 def policy_arrays(controller, state_dim: int,
                   angle_indices: Sequence[int]) -> Dict[str, np.ndarray]:
-    """The policy file of ``controller`` as named arrays (the layout is described by
-    :func:`pilco.persistence.export_policy`)."""
+    """The policy file of ``controller`` as named arrays.
+
+    The file holds, as arrays: ``state_dim``, ``angle_indices`` [A], ``max_action`` [U],
+    ``unsquashed_variance`` (the variance of the unsquashed action at a known state: the
+    RBF policy's moment-matching jitter, 0 for the linear policy), and for an RBF policy
+    ``centers`` [n, F], ``beta`` [U, n] (``(K + noise I)^-1 targets`` per output),
+    ``targets`` [n, U], ``lengthscales`` [U, F], ``variance`` [U], ``noise`` [U]; for a
+    linear policy ``W`` [U, F] and ``b`` [1, U]. ``F = D + A``: the policy reads the state
+    with each angle replaced by (sin, cos), appended after the other dimensions. The JSON
+    metadata names the controller kind (``rbf``/``linear``) and squash (``sin``/``sat``/
+    ``none``).
+    """
     angle_indices = [int(a) for a in angle_indices]
     squash = _SQUASH_KIND[_squash_name(controller.squash)]
     arrays: Dict[str, np.ndarray] = dict(
@@ -344,14 +361,16 @@ def policy_arrays(controller, state_dim: int,
 
 # -- files ----------------------------------------------------------------------------------
 def save_agent(agent, path) -> str:
-    """Write :func:`agent_arrays` of ``agent`` to ``path`` atomically; returns the path."""
+    """Write :func:`agent_arrays` of ``agent`` to ``path`` atomically; returns the path.
+    The body of ``PILCO.save``."""
     written = write_npz_atomic(check_path(path), agent_arrays(agent))
     logger.info("saved PILCO agent (%d transitions) to %s", len(agent.data[0]), written)
     return written
 
 
 def load_agent(agent_class, path):
-    """Rebuild the agent stored at ``path`` as an instance of ``agent_class`` (PILCO)."""
+    """Rebuild the agent stored at ``path`` as an instance of ``agent_class`` (PILCO).
+    The body of ``PILCO.load``."""
     try:
         kwargs, restore = read_agent(path)
     except KeyError as err:  # a metadata entry of the format is missing
@@ -363,7 +382,12 @@ def load_agent(agent_class, path):
 
 
 def export_policy(controller, path, state_dim: int, angle_indices: Sequence[int]) -> str:
-    """Write :func:`policy_arrays` to ``path`` atomically; returns the path written."""
+    """Write :func:`policy_arrays` to ``path`` atomically; returns the path written.
+
+    The body of ``PILCO.export_policy``; for a controller used without an agent, pass
+    the measured state's size ``state_dim`` and its ``angle_indices`` (each read by the
+    controller as a (sin, cos) pair), e.g. ``export_policy(controller, path,
+    controller.state_dim, [])`` for a controller that reads the state as it is."""
     written = write_npz_atomic(check_path(path),
                                policy_arrays(controller, state_dim, angle_indices))
     logger.info("exported %s policy to %s", type(controller).__name__, written)
