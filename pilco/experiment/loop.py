@@ -62,6 +62,8 @@ class Experiment(RunRecord):
         model_data: the task's choice of the model's transitions and their noise factors
             (:attr:`~pilco.experiment.record.RunRecord.model_data`; default every
             episode's, factors 1), also for the agent of a resumed run.
+        reset_options: ``episode number -> options of env.reset`` (e.g. the target of a
+            multi-task run's episode); default none.
 
     The collected episodes, records, timings, task state, saving and the summary are
     those of :class:`~pilco.experiment.record.RunRecord`.
@@ -83,9 +85,11 @@ class Experiment(RunRecord):
                  before_policy_search: Optional[Callable[[Any, int], None]] = None,
                  success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None,
                  model_data: Optional[Callable[[Any], Tuple[np.ndarray, np.ndarray,
-                                                            Optional[np.ndarray]]]] = None):
+                                                            Optional[np.ndarray]]]] = None,
+                 reset_options: Optional[Callable[[int], Optional[dict]]] = None):
         super().__init__(config, directory, settings, success_fn)
         self.model_data = model_data
+        self.reset_options = reset_options
         self.build_agent = build_agent
         self.distance_fn = distance_fn or distance_from_info
         self.render_fn = render_fn
@@ -129,7 +133,9 @@ class Experiment(RunRecord):
         """Run episode ``number`` (random when ``policy_fn`` is None); the final episode is
         rendered. An interrupted rollout is kept as partial data and re-raised."""
         cfg, last = self.config, number == self.config.episodes
+        options = self.reset_options(number) if self.reset_options is not None else None
         ep = rollout(self.make_env(), policy_fn, cfg.steps, seed=self.episode_seed(number),
+                     reset_options=options,
                      random=policy_fn is None, random_action=random_action,
                      distance_fn=self.distance_fn,
                      render=cfg.render and last and self.render_fn is None, quiet=cfg.quiet,

@@ -9,6 +9,7 @@ task                    where
 ``damaged_reacher``     :mod:`pilco.tasks.reacher`, the arm with its elbow stuck
 ``adaptation``          :mod:`pilco.tasks.adaptation`, damage in the middle of a run
 ``pendulum``            :mod:`pilco.tasks.pendulum`, the reference port's Pendulum-v1
+``reacher_multi``       :mod:`pilco.tasks.reacher_multi`, one policy for any target
 ======================  =============================================================
 
 :data:`TASKS` is the one registry: ``python -m pilco.tasks``, the seed sweep
@@ -31,6 +32,7 @@ TASKS = {
     "damaged_reacher": "reacher:DAMAGED_REACHER",
     "adaptation": "adaptation:ADAPTATION",
     "pendulum": "pendulum:PENDULUM",
+    "reacher_multi": "reacher_multi:REACHER_MULTI",
 }
 
 

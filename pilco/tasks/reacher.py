@@ -273,11 +273,9 @@ class ReacherTask(Task):
         (MuJoCo's EGL renderer and TensorFlow cannot share a process)."""
         from .. import plotting
 
-        target = env.unwrapped.target
-
-        def render(episode):
-            return plotting.replay_fetch_frames(episode.states[:, 3:10], target,
-                                                *s.render_size)
+        def render(episode):  # the target of the episode just run
+            return plotting.replay_fetch_frames(episode.states[:, 3:10],
+                                                env.unwrapped.target, *s.render_size)
 
         return render
 
