@@ -36,7 +36,10 @@ __all__ = ["AGENT_FORMAT", "AGENT_VERSION", "POLICY_FORMAT", "agent_arrays", "re
 logger = logging.getLogger(__name__)
 
 AGENT_FORMAT = "pilco-agent"
-AGENT_VERSION = 1
+#: newest agent format: 2 adds context dimensions, the index sets the dynamics model and
+#: the policy read, and several start distributions (tasks). An agent using none of them
+#: is written as version 1, readable by every version of pilco.
+AGENT_VERSION = 2
 
 _SQUASHES = {"squash_sin": squash_sin, "squash_sat": squash_sat}
 # Short names used in policy files (read by pilco.deploy).
@@ -246,10 +249,13 @@ def agent_arrays(agent) -> Dict[str, np.ndarray]:
     """Everything :func:`read_agent` needs to rebuild ``agent``, as named arrays.
 
     Stored: raw data ``X [N, D + U]``, ``Y [N, D]`` and their noise factors ``[N]``; GP
-    hyperparameters (lengthscales [E, F + U], signal and noise variances [E], inducing
-    inputs Z [M, F + U] for a sparse model) and settings; controller type, settings and
+    hyperparameters (lengthscales [E, Fd + U], signal and noise variances [E], inducing
+    inputs Z [M, Fd + U] for a sparse model) and settings; controller type, settings and
     parameters; reward type and parameters; horizon, ``m_init`` [1, D],
-    ``S_init`` [D, D], angle indices, ``num_induced_points`` and ``policy_input_noise``.
+    ``S_init`` [D, D], angle indices, ``num_induced_points`` and ``policy_input_noise``;
+    in version 2 also ``m_init`` [T, D] with ``S_init`` [D, D] or [T, D, D] (T tasks)
+    and the non-default index sets (``context_indices``, ``dynamics_indices``,
+    ``policy_indices``).
     Raises :class:`TypeError` for components that cannot be stored (custom controllers,
     rewards, squash functions or dynamics models).
     """
@@ -260,8 +266,10 @@ def agent_arrays(agent) -> Dict[str, np.ndarray]:
     arrays["data/noise_scales"] = agent.mgpr.noise_scales
     arrays["m_init"] = agent.m_init
     arrays["S_init"] = agent.S_init
+    layout = agent.layout.settings()  # the index sets that differ from their defaults
+    version = 2 if layout or agent.num_tasks > 1 else 1
     meta = dict(
-        format=AGENT_FORMAT, version=AGENT_VERSION, pilco_version=__version__,
+        format=AGENT_FORMAT, version=version, pilco_version=__version__,
         state_dim=agent.state_dim, control_dim=agent.control_dim, horizon=agent.horizon,
         angle_indices=list(agent.angle_indices),
         num_induced_points=(None if agent.num_induced_points is None
@@ -271,6 +279,7 @@ def agent_arrays(agent) -> Dict[str, np.ndarray]:
         reward=_reward_spec(agent.reward, arrays, "reward/"),
         gp=_gp_spec(agent.mgpr, arrays, trainable),
         trainable=trainable,
+        **layout,
     )
     arrays[META_KEY] = np.array(json.dumps(meta))
     return arrays
@@ -295,6 +304,8 @@ def read_agent(path) -> Tuple[Dict[str, Any], Any]:
         num_induced_points=meta["num_induced_points"],
         policy_input_noise=meta["policy_input_noise"],
         model_options={k: float(spec[k]) for k in _GP_SETTINGS if k in spec and k in accepted},
+        **{k: meta[k] for k in ("context_indices", "dynamics_indices", "policy_indices")
+           if k in meta},
     )
     return kwargs, lambda gp: restore_dynamics(gp, arrays, trainable, path)
 
