@@ -25,7 +25,7 @@ from ..controllers import LinearController, RbfController, squash_sat, squash_si
 from ..deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
 from ..files import write_npz_atomic
 from ..rewards import (AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward,
-                       LinearReward)
+                       LinearMapReward, LinearReward)
 from ..validation import check_format_version, check_path
 from .mgpr import MGPR
 from .smgpr import SMGPR
@@ -181,9 +181,15 @@ def _reward_spec(reward, arrays, prefix: str) -> dict:
     if kind is CartPoleReward:
         return dict(type="CartPoleReward", pendulum_length=reward.pendulum_length,
                     width=reward.width)
+    if kind is LinearMapReward:
+        arrays[prefix + "A"] = reward.A.numpy()
+        arrays[prefix + "b"] = reward.b.numpy()
+        return dict(type="LinearMapReward", state_dim=reward.state_dim,
+                    base=_reward_spec(reward.base_reward, arrays, prefix + "base/"))
     raise TypeError(
         f"cannot save a reward of type {kind.__name__}: supported are ExponentialReward, "
-        f"AxisBumpsReward, LinearReward, CombinedRewards and CartPoleReward"
+        f"AxisBumpsReward, LinearReward, CombinedRewards, CartPoleReward and "
+        f"LinearMapReward"
     )
 
 
@@ -204,6 +210,10 @@ def _build_reward(spec: dict, arrays, prefix: str, path):
         return CombinedRewards(spec["state_dim"], parts, coefs=_get(arrays, prefix + "coefs", path))
     if kind == "CartPoleReward":
         return CartPoleReward(pendulum_length=spec["pendulum_length"], width=spec["width"])
+    if kind == "LinearMapReward":
+        base = _build_reward(spec["base"], arrays, prefix + "base/", path)
+        return LinearMapReward(spec["state_dim"], base, _get(arrays, prefix + "A", path),
+                               _get(arrays, prefix + "b", path))
     raise ValueError(f"{path}: unknown reward type {kind!r}")
 
 
