@@ -246,13 +246,14 @@ def test_load_rejects_other_files(tmp_path):
     np.savez(tmp_path / "newer.npz", **arrays)
     with pytest.raises(ValueError, match="version 99"):
         PILCO.load(tmp_path / "newer.npz")
-    # no pilco wrote format versions other than 1: older, odd or missing ones are refused
+    # no pilco wrote format versions other than 1 and 2: older, odd or missing ones are
+    # refused
     for version in (0, -1, "1", 1.0, True):
         meta["version"] = version
         arrays["__meta__"] = np.array(json.dumps(meta))
         np.savez(tmp_path / "other.npz", **arrays)
         with pytest.raises(ValueError, match=f"agent format version {version!r} .*written by "
-                                             r"pilco .*reads agent format version 1$"):
+                                             r"pilco .*reads agent format versions 1 to 2$"):
             PILCO.load(tmp_path / "other.npz")
     # another pilco release writing the same format version: read as ours
     meta.update(version=1, pilco_version="0.0.1")
