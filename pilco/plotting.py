@@ -115,7 +115,8 @@ def plot_targets(training: Sequence[Sequence[float]], test: Sequence[Sequence[fl
         ax.grid(alpha=0.3)
         if k == 0:
             ax.legend(fontsize=8)
-    fig.colorbar(dots, ax=fig.axes, label="steps to the target")
+        else:
+            fig.colorbar(dots, ax=ax, label="steps to the target")
     fig.suptitle(f"held-out targets reached within {within} steps: {int(ok.sum())} of "
                  f"{len(tests)}")
     return _save(fig, path)
