@@ -24,7 +24,7 @@ from pilco.angles import augment_state
 from pilco.controllers import LinearController, RbfController, squash_sin
 from pilco.models import PILCO
 from pilco.rewards import CombinedRewards, ExponentialReward, LinearMapReward, difference_map
-from test_gradients import assert_grad_close, H_FD
+from test_gradients import H_FD, assert_grad_close, check_against_differences
 from test_monte_carlo import (assert_mc, assert_rejects, gauss, gp_latent, mc_cov, mc_mean,
                               np_, policy_np)
 
@@ -392,20 +392,7 @@ def test_multitask_objective_gradient_matches_finite_differences():
         loss = p._rollout.policy_loss()
     grads = tape.gradient(loss, variables)
     assert all(g is not None for g in grads)
-    for var, grad in zip(variables, grads):
-        grad = np.asarray(tf.convert_to_tensor(grad).numpy())
-        v0 = var.numpy().copy()
-        fd = np.zeros(v0.size)
-        for i in range(v0.size):
-            step = np.zeros(v0.size)
-            step[i] = H_FD
-            var.assign((v0.ravel() + step).reshape(v0.shape))
-            up = float(p._rollout.policy_loss().numpy())
-            var.assign((v0.ravel() - step).reshape(v0.shape))
-            down = float(p._rollout.policy_loss().numpy())
-            fd[i] = (up - down) / (2 * H_FD)
-        var.assign(v0)
-        assert_grad_close(grad.ravel(), fd, f"d loss / d {var.name}")
+    check_against_differences(p, variables, grads)
 
 
 def test_multitask_policy_optimisation_improves_the_sum():

@@ -12,7 +12,7 @@ import numpy as np
 if TYPE_CHECKING:  # the settings class lives with the task, which imports this module
     from .reacher import ReacherSettings
 
-__all__ = ["PAPER_GP_PRIORS", "agent_builder", "ignore_constant_inputs", "init_policy_near",
+__all__ = ["PAPER_GP_PRIORS", "agent_builder", "reacher_agent", "ignore_constant_inputs", "init_policy_near",
            "limit_bumps", "set_gp_priors", "position_weights", "main_position_reward",
            "schedule", "after_model_fit"]
 
@@ -35,14 +35,12 @@ def ignore_constant_inputs(agent, lengthscale: float = 100.0) -> None:
         model.kernel.lengthscales.assign(ell)
 
 
-def agent_builder(s: ReacherSettings, target: np.ndarray,
+def agent_builder(s: "ReacherSettings", target: np.ndarray,
                   joint_limits: Optional[np.ndarray] = None):
     """``(data, start_states) -> PILCO`` for the reacher; ``target [3]`` is the gripper
     target, the reward looks at state dims 0..2 (x, y, z); with ``--limit-cost`` also at
     the joint angles (dims 3..9) near ``joint_limits [7, 2]`` (±inf: unlimited)."""
-    from ..controllers import RbfController, squash_sin
-    from ..models import PILCO
-    from ..rewards import CombinedRewards, ExponentialReward
+    from ..rewards import ExponentialReward
 
     def position_reward(D: int, width: float) -> ExponentialReward:
         t = np.zeros((1, D))
@@ -50,26 +48,45 @@ def agent_builder(s: ReacherSettings, target: np.ndarray,
         return ExponentialReward(D, position_weights(D, width), t)
 
     def build(data, start_states):
-        X, Y = data
-        D, U = Y.shape[1], X.shape[1] - Y.shape[1]
-        controller = RbfController(D, U, s.basis_functions, s.max_action, squash_sin,
-                                   seed=s.seed)
-        if s.policy_init_var:
-            init_policy_near(controller, start_states[0], s.policy_init_var, s.seed)
-        reward = position_reward(D, s.cost_width)
-        if s.fine_cost_width:
-            reward = CombinedRewards(D, [reward, position_reward(D, s.fine_cost_width)])
-        bumps = (limit_bumps(D, joint_limits, s.limit_cost)
-                 if s.limit_cost and joint_limits is not None else None)
-        if bumps is not None:
-            reward = CombinedRewards(D, [reward, bumps], [1.0, -s.limit_cost_weight])
-        agent = PILCO(data, controller, reward, horizon=s.planning_horizon or s.horizon,
-                      m_init=start_states[0:1], S_init=s.start_var * np.eye(D))
-        set_gp_priors(agent, s)
-        after_model_fit(s)(agent)
-        return agent
+        D = np.shape(data[1])[1]
+        return reacher_agent(s, data, start_states, joint_limits, position_reward,
+                             m_init=start_states[0:1], S_init=s.start_var * np.eye(D))
 
     return build
+
+
+def reacher_agent(s: "ReacherSettings", data, start_states: np.ndarray,
+                  joint_limits: Optional[np.ndarray], position_reward, m_init, S_init,
+                  **options):
+    """The reacher's PILCO agent on ``data`` (X [N, D + U], Y [N, D]): an RBF policy of
+    the settings' size (centres near ``start_states[0]`` with ``--policy-init-var``), the
+    reward ``position_reward(D, width)`` of ``--cost-width`` plus, with
+    ``--fine-cost-width``, a second of that width, minus the joint-limit bumps
+    (``--limit-cost``), the start ``m_init``, ``S_init``; the paper's GP priors with
+    ``--gp-priors paper``. ``options`` go to :class:`~pilco.models.PILCO` (e.g.
+    ``context_indices``)."""
+    from ..controllers import RbfController, squash_sin
+    from ..models import PILCO
+    from ..rewards import CombinedRewards
+
+    X, Y = data
+    D, U = Y.shape[1], X.shape[1] - Y.shape[1]
+    controller = RbfController(D, U, s.basis_functions, s.max_action, squash_sin,
+                               seed=s.seed)
+    if s.policy_init_var:
+        init_policy_near(controller, start_states[0], s.policy_init_var, s.seed)
+    reward = position_reward(D, s.cost_width)
+    if s.fine_cost_width:
+        reward = CombinedRewards(D, [reward, position_reward(D, s.fine_cost_width)])
+    bumps = (limit_bumps(D, joint_limits, s.limit_cost)
+             if s.limit_cost and joint_limits is not None else None)
+    if bumps is not None:
+        reward = CombinedRewards(D, [reward, bumps], [1.0, -s.limit_cost_weight])
+    agent = PILCO(data, controller, reward, horizon=s.planning_horizon or s.horizon,
+                  m_init=m_init, S_init=S_init, **options)
+    set_gp_priors(agent, s)
+    after_model_fit(s)(agent)
+    return agent
 
 
 def init_policy_near(controller, x0: np.ndarray, var: float, seed: int) -> None:

@@ -29,8 +29,7 @@ import numpy as np
 from ..experiment import Experiment, ExperimentConfig, make_env
 from ..experiment.episode import rollout
 from . import reacher
-from .reacher_agent import (after_model_fit, init_policy_near, limit_bumps, position_weights,
-                            set_gp_priors)
+from .reacher_agent import after_model_fit, position_weights, reacher_agent
 from .settings import non_negative_float, positive_int, setting, task_settings
 
 __all__ = ["MultiReacherSettings", "MultiReacherTask", "REACHER_MULTI", "draw_targets",
@@ -94,9 +93,7 @@ class MultiReacherTask(reacher.ReacherTask):
         """``(data, start_states) -> PILCO`` on the 13-dimensional state: an RBF policy
         reading all of it, GPs on the arm's ten dimensions, the costs on the gripper
         minus the target, one start per training target."""
-        from ..controllers import RbfController, squash_sin
-        from ..models import PILCO
-        from ..rewards import CombinedRewards, ExponentialReward, LinearMapReward, difference_map
+        from ..rewards import ExponentialReward, LinearMapReward, difference_map
 
         train = self.targets(s, TRAIN_STREAM, s.training_targets)
         joint_limits = env.unwrapped.joint_limits
@@ -107,26 +104,12 @@ class MultiReacherTask(reacher.ReacherTask):
                                                         np.zeros((1, 3))), A)
 
         def build(data, start_states):
-            X, Y = data
-            D, U = Y.shape[1], X.shape[1] - Y.shape[1]
-            controller = RbfController(D, U, s.basis_functions, s.max_action, squash_sin,
-                                       seed=s.seed)
-            if s.policy_init_var:
-                init_policy_near(controller, start_states[0], s.policy_init_var, s.seed)
-            reward = position_cost(D, s.cost_width)
-            if s.fine_cost_width:
-                reward = CombinedRewards(D, [reward, position_cost(D, s.fine_cost_width)])
-            bumps = limit_bumps(D, joint_limits, s.limit_cost) if s.limit_cost else None
-            if bumps is not None:
-                reward = CombinedRewards(D, [reward, bumps], [1.0, -s.limit_cost_weight])
+            D = np.shape(data[1])[1]
             starts = np.repeat(start_states[0:1], len(train), axis=0)
             starts[:, list(CONTEXT)] = train
-            agent = PILCO(data, controller, reward, horizon=s.planning_horizon or s.horizon,
-                          m_init=starts, S_init=start_cov(D, s.start_var, s.context_var),
-                          context_indices=CONTEXT)
-            set_gp_priors(agent, s)
-            after_model_fit(s)(agent)
-            return agent
+            return reacher_agent(s, data, start_states, joint_limits, position_cost,
+                                 m_init=starts, S_init=start_cov(D, s.start_var, s.context_var),
+                                 context_indices=CONTEXT)
 
         return build
 
