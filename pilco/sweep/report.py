@@ -60,7 +60,7 @@ def write_report(args: argparse.Namespace, specs: Sequence[RunSpec],
                                ", ".join(f"{k}: {v}" for k, v in sorted(seen.items())))
     report = {
         "task": args.task,
-        "command": list(getattr(args, "command", [])),
+        "command": list(args.command),  # set by main: the command line that ran
         "seeds": sorted({s.seed for s in specs}),
         "settings": list(described),
         "extra_flags": list(extra),
