@@ -428,11 +428,13 @@ def test_a_corrupt_summary_is_run_again_not_counted(faulty_sweep, tmp_path):
 # ------------------------------------------------------------- the driver interrupted
 def interrupted(out):
     """A sweep of two settings: 5-step episodes (a quick run) and 1000-step ones (about
-    three seconds an episode)."""
+    three seconds an episode; :data:`EPISODES` of them leave the driver time to be
+    signalled while the slow run is under way, also on a busy machine)."""
     return ["cartpole", "--seeds", "0", "--grid", "horizon=5,1000", "--output", str(out),
-            "--no-progress", "--no-figures", "--max-retries", "0", "--", "--episodes", "3",
-            "--random-episodes", "3"]
+            "--no-progress", "--no-figures", "--max-retries", "0", "--", "--episodes",
+            str(EPISODES), "--random-episodes", str(EPISODES)]
 QUICK, SLOW = "horizon=5", "horizon=1000"
+EPISODES = 5
 
 
 def driver_logs(ray_folder, pid):
@@ -556,10 +558,10 @@ def test_an_interrupted_driver_stops_its_runs_and_keeps_what_finished(interrupte
                                                                      (SLOW, "not_run")]
     assert report["results"][QUICK]["finished"] == 1
     assert report["results"][SLOW]["not_run"] == 1
-    check_run_files(s["quick"], 3)
+    check_run_files(s["quick"], EPISODES)
     assert s["slow_record"]["status"] == "interrupted"
     # the stopped run saved its episodes so far and ended before its last one
-    assert 1 <= len(s["saved"]) <= len(s["slow_episodes"]) < 3
+    assert 1 <= len(s["saved"]) <= len(s["slow_episodes"]) < EPISODES
     assert s["slow_episodes"][:len(s["saved"])] == s["saved"]
     assert s["slow_summary"] is None or s["slow_summary"]["complete"] is False
 
@@ -575,7 +577,7 @@ def test_the_rerun_skips_finished_runs_and_resumes_the_interrupted_one(interrupt
         s["quick_summary_mtime"]
     kept = s["slow_episodes"]
     assert attempts(s["slow"]) == [f"resume after episode {len(kept)}"]
-    check_run_files(s["slow"], 3, kept=kept)
+    check_run_files(s["slow"], EPISODES, kept=kept)
     assert load(os.path.join(s["slow"], runs.RUN_RECORD))["status"] == "finished"
     assert {label: r["finished"] for label, r in report["results"].items()} == {
         QUICK: 1, SLOW: 1}
