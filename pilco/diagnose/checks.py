@@ -57,12 +57,28 @@ def _cost_of_states(agent, geometry: CostGeometry, states: np.ndarray) -> np.nda
         agent.reward.compute_reward(x[None], zero)[0])[0, 0]) for x in states])
 
 
+def episode_task(agent, episode: Episode) -> Optional[int]:
+    """The start distribution (task) of a multi-task agent that ``episode`` ran from: the
+    one whose mean is closest to the episode's first state (its context, a target, is
+    the task's); None for an agent with one start distribution."""
+    if getattr(agent, "num_tasks", 1) <= 1:
+        return None
+    gaps = np.linalg.norm(np.asarray(agent.m_init) - np.asarray(episode.states[0])[None],
+                          axis=1)
+    return int(np.argmin(gaps))
+
+
 def one_step_check(agent, episode: Episode, geometry: Optional[CostGeometry],
                    thresholds: Thresholds) -> Dict[str, Any]:
-    """The model's one-step predictions along the real episode (see the module doc)."""
+    """The model's one-step predictions along the real episode (see the module doc).
+    Context dimensions (never predicted: change and variance 0) count as within and are
+    left out of the overall coverage."""
     X, Y = episode.transitions()
     mean, var = agent.one_step_prediction(X)
-    z = (Y - mean) / np.sqrt(var)
+    predicted = [d for d in range(Y.shape[1])
+                 if d not in set(getattr(agent, "context_indices", ()))]
+    sd = np.sqrt(var)
+    z = np.divide(Y - mean, sd, out=np.zeros_like(Y), where=sd > 0)
     within = np.abs(z) <= thresholds.z
     dims = list(geometry.dims) if geometry is not None else []
     per_dim = within.mean(axis=0)
@@ -72,7 +88,7 @@ def one_step_check(agent, episode: Episode, geometry: Optional[CostGeometry],
     still = (np.abs(Y) <= 1e-9 + 1e-6 * rms_change) & (np.abs(mean) > thresholds.z * np.sqrt(var))
     outside = ~within
     return {
-        "coverage": float(within.mean()),
+        "coverage": float(within[:, predicted].mean()),
         "coverage_cost_dims": float(within[:, dims].mean()) if dims else None,
         "cost_dims": dims,
         "coverage_per_dim": per_dim,
@@ -128,10 +144,13 @@ def open_loop_check(agent, episode: Episode, geometry: Optional[CostGeometry],
             "threshold": float(threshold), "wrong": bool(error[closest] > threshold)}
 
 
-def predicted_run(agent, steps: int, geometry: Optional[CostGeometry]) -> Dict[str, Any]:
-    """The multi-step prediction of ``steps`` steps from the start distribution under the
-    agent's policy: predicted cost per step and, with a geometry, distance mean and std."""
-    M, S, R, _ = (np.asarray(v) for v in agent.predict_trajectory_with_rewards(horizon=steps))
+def predicted_run(agent, steps: int, geometry: Optional[CostGeometry],
+                  task: Optional[int] = None) -> Dict[str, Any]:
+    """The multi-step prediction of ``steps`` steps from the start distribution (of
+    ``task``, for a multi-task agent) under the agent's policy: predicted cost per step
+    and, with a geometry, distance mean and std."""
+    M, S, R, _ = (np.asarray(v) for v in
+                  agent.predict_trajectory_with_rewards(horizon=steps, task=task))
     out: Dict[str, Any] = {"reward": R}
     if geometry is not None:
         out["cost"] = geometry.max_reward - R
@@ -143,7 +162,7 @@ def multi_step_check(exp, agent, episode: Episode, geometry: Optional[CostGeomet
                      thresholds: Thresholds) -> Dict[str, Any]:
     """Predicted distance and cost per step against the real episode's."""
     steps = exp.config.steps
-    pred = predicted_run(agent, steps, geometry)
+    pred = predicted_run(agent, steps, geometry, episode_task(agent, episode))
     real_d = np.asarray(episode.distances, dtype=np.float64)
     out: Dict[str, Any] = {"steps": steps, "real_distance": real_d}
     if geometry is None:
@@ -189,7 +208,8 @@ def objective_check(agent, episode: Episode, geometry: Optional[CostGeometry],
 
 
 def _candidate(view, number: int, geometry: Optional[CostGeometry], kind: str,
-               seed: Optional[int], env, seconds: float = 0.0) -> Dict[str, Any]:
+               seed: Optional[int], env, seconds: float = 0.0,
+               task: Optional[int] = None) -> Dict[str, Any]:
     """Predicted cost (the policy objective) and, with ``env``, the real outcome of the
     agent's current policy."""
     agent, cfg = view.agent, view.config
@@ -197,12 +217,14 @@ def _candidate(view, number: int, geometry: Optional[CostGeometry], kind: str,
     out: Dict[str, Any] = {"start": kind, "seed": seed, "seconds": seconds,
                            "pred_cost": agent.horizon * max_reward - agent.expected_return()}
     if geometry is not None:
-        pred = predicted_run(agent, cfg.steps, geometry)
+        pred = predicted_run(agent, cfg.steps, geometry, task)
         out["pred_final_distance"] = float(pred["distance_mean"][-1])
         out["pred_min_distance"] = float(np.min(pred["distance_mean"][1:]))
     if env is not None:
+        options = view.reset_options(number) if getattr(view, "reset_options", None) else None
         ep = rollout(env, lambda x: agent.compute_action(x)[0], cfg.steps,
-                     seed=view.episode_seed(number), distance_fn=view.distance_fn, quiet=True)
+                     seed=view.episode_seed(number), distance_fn=view.distance_fn, quiet=True,
+                     reset_options=options)
         out["real_distance"] = ep.distances
         out["real_final_distance"] = float(ep.distances[-1])
         out["real_min_distance"] = float(np.min(ep.distances[1:])) if ep.steps else None
@@ -211,13 +233,15 @@ def _candidate(view, number: int, geometry: Optional[CostGeometry], kind: str,
 
 
 def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restarts: int,
-                    seed: int, env, thresholds: Thresholds) -> Dict[str, Any]:
+                    seed: int, env, thresholds: Thresholds,
+                    task: Optional[int] = None) -> Dict[str, Any]:
     """The run's policy against ``restarts`` re-optimisations from random policies and one
-    continuing from the run's policy, all on the same model with the run's settings."""
+    continuing from the run's policy, all on the same model with the run's settings
+    (``task``: the start distribution the episode ran from, for a multi-task agent)."""
     agent, cfg = view.agent, view.config
     iters = cfg.policy_iterations(number)
     run_policy = snapshot(agent.controller)
-    candidates = [_candidate(view, number, geometry, "run", None, env)]
+    candidates = [_candidate(view, number, geometry, "run", None, env, task=task)]
     starts: List[Tuple[str, Optional[int]]] = [("continued", None)]
     if restarts and callable(getattr(agent.controller, "randomize", None)):
         seeds = np.random.default_rng([int(seed), int(cfg.seed), number]).integers(
@@ -236,7 +260,7 @@ def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restart
             t0 = time.perf_counter()
             improve_policy(view, number)
             candidates.append(_candidate(view, number, geometry, kind, s, env,
-                                         time.perf_counter() - t0))
+                                         time.perf_counter() - t0, task))
             logger.info("optimiser check %d/%d: predicted cost %.3f (run's %.3f) in %.1f s", i,
                         len(starts), candidates[-1]["pred_cost"], candidates[0]["pred_cost"],
                         candidates[-1]["seconds"])

@@ -17,7 +17,7 @@ from typing import Any, Dict, Optional
 import numpy as np
 
 from ..files import write_json_atomic
-from .checks import (multi_step_check, objective_check, one_step_check, open_loop_check,
+from .checks import (episode_task, multi_step_check, objective_check, one_step_check, open_loop_check,
                      optimiser_check)
 from .geometry import cost_geometry
 from .replay import agent_of_episode
@@ -59,7 +59,8 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
         except Exception as err:  # noqa: BLE001 - the rollouts are optional evidence
             logger.warning("the run's environment cannot be made (%s): the candidate "
                            "policies are not run on the real system", err)
-    optimiser = optimiser_check(view, number, geometry, restarts, seed, env, thresholds)
+    optimiser = optimiser_check(view, number, geometry, restarts, seed, env, thresholds,
+                                episode_task(agent, ep))
     rerun_error = None
     if env is not None:
         rerun = np.asarray(optimiser["candidates"][0]["real_distance"])

@@ -53,13 +53,15 @@ def improve_policy(exp, number: int) -> float:
     restarts = cfg.policy_restarts_at(number, solved)
     if exp.before_policy_search is not None:
         exp.before_policy_search(agent, number)
+    # XLA is asked for only when chosen: agents without the option keep working
+    compiler = {"jit_compile": True} if cfg.policy_compiler == "xla" else {}
     with progress_bar(iters * restarts, f"episode {number} policy", cfg.quiet) as bar:
         expected = agent.optimize_policy(
             maxiter=iters, restarts=restarts,
             seed=exp.episode_seed(number), callback=optimizer_callback(bar),
             method=cfg.policy_method,
             min_rel_improvement=cfg.policy_early_stop_at(solved),
-            patience=cfg.policy_patience, jit_compile=cfg.policy_compiler == "xla")
+            patience=cfg.policy_patience, **compiler)
     logger.info("episode %d: predicted return %.3f over %d steps", number, expected,
                 agent.horizon)
     return expected

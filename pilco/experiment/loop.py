@@ -183,12 +183,13 @@ class Experiment(RunRecord):
             cpu[phase] = time.process_time() - c0
             raise_if_stop_requested()
         self.cpu_seconds[number] = cpu
+        evaluations = getattr(self.agent, "policy_evaluations", None)
         prediction = predictions_before(self)
         agent = self.agent
         ep = self._interact(number, lambda x: agent.compute_action(x)[0])
         seconds["interaction"] = ep.seconds
         prediction.update(predictions_after(self, ep))
-        return self._add_episode(ep, seconds, prediction)
+        return self._add_episode(ep, seconds, prediction, evaluations)
 
     def run_episode(self) -> Dict[str, Any]:
         """The next episode: random while fewer than ``random_episodes``, else learned."""

@@ -143,10 +143,13 @@ class RunRecord:
         return summarise(self)
 
     def _add_episode(self, episode: Episode, seconds: Dict[str, float],
-                     prediction: Dict[str, np.ndarray]) -> Dict[str, Any]:
+                     prediction: Dict[str, np.ndarray],
+                     policy_evaluations: Optional[int] = None) -> Dict[str, Any]:
         self.episodes.append(episode)
         self.predictions.append(prediction)
         rec = episode_record(episode, len(self.episodes), seconds, self.config)
+        if policy_evaluations is not None:
+            rec["policy_evaluations"] = int(policy_evaluations)
         self.records.append(rec)
         for p in PHASES:
             self.seconds[p] += float(seconds.get(p, 0.0))

@@ -427,8 +427,16 @@ class PILCO(gpflow.base.Module):
             loss, optimizer = self._rollout.xla_policy_loss, self._xla_optimizer
         else:
             loss, optimizer = self._rollout.policy_loss, self._policy_optimizer
+        self._last_search = optimizer
         return search_policy(loss, self.controller, optimizer, maxiter, restarts, rng, method,
                              callback, min_rel_improvement, patience, jit_compile=jit_compile)
+
+    @property
+    def policy_evaluations(self) -> int:
+        """Objective + gradient evaluations of the last :meth:`optimize_policy` (all its
+        restarts; 0 before the first)."""
+        last = getattr(self, "_last_search", None)
+        return 0 if last is None else int(last.evaluations)
 
     # -- acting -----------------------------------------------------------------------------
     def compute_action(self, x) -> np.ndarray:
