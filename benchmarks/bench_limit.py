@@ -550,10 +550,11 @@ def build_problem(problem: str, n: int):
 
 
 def measure(problems: Dict[str, Iterable[int]], repeats: int, floor_data: int,
-            matmul_size: int, elements: int) -> Dict[str, object]:
+            matmul_size: int, elements: int, count: bool = True) -> Dict[str, object]:
     """Everything one thread setting measures, in this process: the machine's references
     (matrix product, elementwise bandwidth, cost of a tiny operation) and, per problem and
-    size, the flop count and the timing of one objective + gradient."""
+    size, the flop count (unless ``count`` is false: it does not depend on the threads)
+    and the timing of one objective + gradient."""
     import tensorflow as tf
 
     from pilco.moments import pair_groups
@@ -562,8 +563,10 @@ def measure(problems: Dict[str, Iterable[int]], repeats: int, floor_data: int,
         "environment": {k: os.environ.get(k) for k in (
             "TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS", "OPENBLAS_NUM_THREADS",
             "OMP_NUM_THREADS")},
+        "load_before": [round(x, 2) for x in os.getloadavg()],
         "matmul_size": matmul_size, "elementwise_elements": elements,
-        "matmul_gflops": matmul_rates(matmul_size, repeats),
+        # a product takes seconds: three after the warm-up
+        "matmul_gflops": matmul_rates(matmul_size, min(3, repeats)),
         "elementwise_gbs": elementwise_rates(elements, repeats),
         # its calls take a millisecond: more of them, the slope of two minima is noisy
         "op_seconds": op_overhead(max(20, 4 * repeats)),
@@ -572,7 +575,7 @@ def measure(problems: Dict[str, Iterable[int]], repeats: int, floor_data: int,
     for problem, sizes in problems.items():
         # count first (the counting agents are dropped), then trace every size and the
         # small problem of %fix and time them in alternating rounds
-        counted = {n: count_evaluation(build_problem(problem, n))
+        counted = {n: count_evaluation(build_problem(problem, n)) if count else None
                    for n in (floor_data,) + tuple(sizes)}
         calls, infos, dims = {}, {}, {}
         for n in (floor_data,) + tuple(sizes):
@@ -582,31 +585,60 @@ def measure(problems: Dict[str, Iterable[int]], repeats: int, floor_data: int,
         seconds = interleaved_seconds(calls, repeats)
         for n in sizes:
             d = dims[n]
-            out["rows"].append({
+            row = {
                 "problem": problem, "N": n, **d,
                 "pair_groups": len(pair_groups(d["outputs"] * (d["outputs"] + 1) // 2,
                                                d["outputs"])),
-                "flops": counted[n]["flops"], "graph_operations": counted[n]["ops"],
-                "bytes": counted[n]["bytes"],
                 "pair_block_flops": pair_block_flops(d["outputs"], n, d["inputs"],
                                                      d["horizon"]),
-                "flops_by_type": dict(counted[n]["flops_by_type"].most_common(8)),
-                "unknown_shapes": counted[n]["unknown_shapes"],
-                "uncounted_types": counted[n]["uncounted_types"],
                 **infos[n],
                 "seconds": min(seconds[n]), "median_seconds": float(np.median(seconds[n])),
                 "all_seconds": seconds[n],
                 "floor_data": floor_data, "floor_seconds": min(seconds[floor_data]),
-                "floor_flops": counted[floor_data]["flops"],
                 "pair_block_seconds": d["horizon"] * pair_block_seconds(
                     d["outputs"], d["inputs"], n, repeats),
-            })
+            }
+            if count:
+                row.update(counted_fields(counted[n], counted[floor_data]))
+            out["rows"].append(row)
+    out["load_after"] = [round(x, 2) for x in os.getloadavg()]
     # the threads as tf.config reports them (0: not configured there; the environment
     # variables above are read by the runtime directly)
     out["tensorflow_threads"] = {
         "intra_op": tf.config.threading.get_intra_op_parallelism_threads(),
         "inter_op": tf.config.threading.get_inter_op_parallelism_threads()}
     return out
+
+
+def counted_fields(counted: Count, floor: Count) -> Dict[str, object]:
+    """The fields of a row that come from :func:`count_evaluation` (``floor``: the
+    count of the small problem of %fix)."""
+    return {"flops": counted["flops"], "graph_operations": counted["ops"],
+            "bytes": counted["bytes"], "floor_flops": floor["flops"],
+            "flops_by_type": dict(counted["flops_by_type"].most_common(8)),
+            "unknown_shapes": counted["unknown_shapes"],
+            "uncounted_types": counted["uncounted_types"]}
+
+
+#: the fields :func:`counted_fields` makes
+COUNTED = ("flops", "graph_operations", "bytes", "floor_flops", "flops_by_type",
+           "unknown_shapes", "uncounted_types")
+
+
+def share_counts(settings: Dict[str, Dict[str, object]]) -> None:
+    """Copy the counted fields of the first setting's rows into the other settings' rows
+    of the same problem and size (counted once: the graph is the same, since every
+    setting keeps TensorFlow's default inter-op threads and so the same pair groups)."""
+    first, *others = settings.values()
+    by_key = {(r["problem"], r["N"]): r for r in first["rows"]}
+    for res in others:
+        for r in res["rows"]:
+            source = by_key[(r["problem"], r["N"])]
+            if source["pair_groups"] != r["pair_groups"]:
+                raise RuntimeError(f"{r['problem']} N={r['N']}: the settings' graphs differ "
+                                   f"({source['pair_groups']} and {r['pair_groups']} pair "
+                                   "groups): count each")
+            r.update({k: source[k] for k in COUNTED})
 
 
 # -- both settings, in fresh processes ------------------------------------------------------
@@ -620,7 +652,7 @@ SETTINGS = {
 }
 
 
-def run_setting(setting: str, args) -> Dict[str, object]:
+def run_setting(setting: str, args, count: bool = True) -> Dict[str, object]:
     """:func:`measure` in a fresh process with ``SETTINGS[setting]``'s environment."""
     env = dict(os.environ)
     for key, value in SETTINGS[setting].items():
@@ -633,6 +665,7 @@ def run_setting(setting: str, args) -> Dict[str, object]:
                "--repeats", str(args.repeats), "--floor-data", str(args.floor_data),
                "--matmul-size", str(args.matmul_size), "--elements", str(args.elements)]
     command += ["--quick"] if args.quick else []
+    command += [] if count else ["--_no-count"]
     command += ["--problem", args.problem]
     done = subprocess.run(command, capture_output=True, text=True, env=env)
     if done.returncode != 0:
@@ -692,7 +725,8 @@ def print_report(results: Dict[str, object]) -> None:
     print(f"load average before {results['load_before']}, after {results['load_after']}")
     for s, res in settings.items():
         mm, ew = res["matmul_gflops"], res["elementwise_gbs"]
-        print(f"threads {s}: {res['matmul_size']}^2 matmul TensorFlow {mm['tensorflow']:.2f}, "
+        print(f"threads {s} (load average {res['load_before']} -> {res['load_after']}): "
+              f"{res['matmul_size']}^2 matmul TensorFlow {mm['tensorflow']:.2f}, "
               f"numpy {mm['numpy']:.2f} GFLOP/s; a*b+c on {res['elementwise_elements']} "
               f"doubles TensorFlow {ew['tensorflow']:.1f}, numpy {ew['numpy']:.1f} GB/s; "
               f"tiny op {res['op_seconds'] * 1e6:.2f} us")
@@ -729,6 +763,7 @@ def main(argv=None):
     parser.add_argument("--threads", choices=["1", "default", "both"], default="both")
     parser.add_argument("--json", default=None, help="write the results to this file")
     parser.add_argument("--_worker", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--_no-count", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
     sizes = QUICK_SIZES if args.quick else SIZES
@@ -736,16 +771,18 @@ def main(argv=None):
 
     if args._worker:
         print(json.dumps(measure(problems, args.repeats, args.floor_data, args.matmul_size,
-                                 args.elements)))
+                                 args.elements, count=not args._no_count)))
         return 0
 
     results: Dict[str, object] = {
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                     "processor": platform.processor(), "python": platform.python_version()},
         "load_before": [round(x, 2) for x in os.getloadavg()], "settings": {}}
-    for setting in (["1", "default"] if args.threads == "both" else [args.threads]):
-        results["settings"][setting] = run_setting(setting, args)
+    for i, setting in enumerate(["1", "default"] if args.threads == "both"
+                                else [args.threads]):
+        results["settings"][setting] = run_setting(setting, args, count=i == 0)
     results["load_after"] = [round(x, 2) for x in os.getloadavg()]
+    share_counts(results["settings"])
     first = next(iter(results["settings"].values()))
     results["cross_check"] = {p: quadratic_check([r for r in first["rows"] if r["problem"] == p])
                               for p in problems}
