@@ -13,6 +13,8 @@ setup(
     long_description_content_type="text/markdown",
     packages=find_packages(include=["pilco", "pilco.*"]),
     python_requires=">=3.10,<3.13",
+    # `pilco run|sweep|diagnose|tasks`, the same as `python -m pilco`
+    entry_points={"console_scripts": ["pilco = pilco.command:main"]},
     install_requires=[
         # gpflow 2.11 is built against numpy 1.x
         "numpy>=1.24,<2",

@@ -16,28 +16,15 @@ Usage::
 
     python examples/adaptation.py --seed 0
 """
-import os
 import sys
 
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
+from pilco.runtime import quiet_tensorflow
 
-from pilco.experiment.cli import finish  # noqa: E402
-from pilco.tasks import adaptation  # noqa: E402
+quiet_tensorflow()  # before TensorFlow loads: no C++ start-up lines, no CUDA probes on a CPU
 
-
-def main(argv=None) -> int:
-    # 1. settings (the reacher's, plus the damage and the episode budgets)
-    args = adaptation.parse_args(argv)
-    # 2. the task: the healthy Fetch arm and its agent
-    exp = adaptation.make_experiment(args)
-    # 3. PILCO on the healthy arm until it reaches, the damage, PILCO until it reaches again
-    summary = adaptation.run(exp, args)
-    # 4. report: tables, when the damage came and how many episodes recovery took
-    return finish(exp, summary, args, title="Timing (adaptation)",
-                  notes=[f"\ndamage at episode {summary['damage_at_episode']}; episodes to "
-                         f"recover: {summary['episodes_to_recover']}"],
-                  figures=lambda: adaptation.figures(exp, args))
-
+from pilco.tasks.adaptation import ADAPTATION  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # the four steps of examples/reacher.py (parse, experiment, run, finish) in one call:
+    # PILCO on the healthy arm until it reaches, the damage, PILCO until it reaches again
+    sys.exit(ADAPTATION.main())

@@ -13,27 +13,24 @@ Usage::
     python examples/cartpole.py --seed 0
     python examples/cartpole.py --resume runs/cartpole-seed0 --episodes 12
 """
-import os
 import sys
 
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
+from pilco.runtime import quiet_tensorflow
 
-from pilco.experiment.cli import finish  # noqa: E402
-from pilco.tasks import cartpole  # noqa: E402
+quiet_tensorflow()  # before TensorFlow loads: no C++ start-up lines, no CUDA probes on a CPU
+
+from pilco.tasks.cartpole import CARTPOLE as task  # noqa: E402
 
 
 def main(argv=None) -> int:
     # 1. settings (the release's defaults; --resume DIR continues a saved run)
-    args = cartpole.parse_args(argv)
+    settings = task.parse(argv)
     # 2. the task: cart-pole env, RBF policy, GP dynamics, saturating cost, run directory
-    exp = cartpole.make_experiment(args)
+    exp = task.experiment(settings)
     # 3. PILCO: a random episode, then per episode: train GPs, optimise policy, apply it
-    summary = exp.run()
+    summary = task.run(exp, settings)
     # 4. report: tables, figures, the final episode as a GIF (exit 130 after Ctrl-C)
-    return finish(exp, summary, args, reference=cartpole.PAPER_SECONDS,
-                  title=f"Timing (cartpole, seed {args.seed}, "
-                        f"{len(summary['episodes'])} episodes)",
-                  figures=lambda: cartpole.figures(exp, args))
+    return task.finish(exp, summary, settings)
 
 
 if __name__ == "__main__":

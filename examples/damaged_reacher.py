@@ -12,29 +12,15 @@ Usage::
 
     python examples/damaged_reacher.py --seed 0
 """
-import os
 import sys
 
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
+from pilco.runtime import quiet_tensorflow
 
-from pilco.experiment.cli import finish  # noqa: E402
-from pilco.tasks import reacher  # noqa: E402
+quiet_tensorflow()  # before TensorFlow loads: no C++ start-up lines, no CUDA probes on a CPU
 
-TASK = "damaged_reacher"
-
-
-def main(argv=None) -> int:
-    # 1. settings (the paper's defaults, the damage; --resume DIR continues a saved run)
-    args = reacher.parse_args(argv, damaged=True)
-    # 2. the task: the damaged Fetch arm, RBF policy, GP dynamics, cost on the gripper
-    exp = reacher.make_experiment(args, TASK, damaged=True)
-    # 3. PILCO: a random episode, then per episode: train GPs, optimise policy, apply it
-    summary = exp.run()
-    # 4. report: tables, figures, the final episode as a GIF (exit 130 after Ctrl-C)
-    return finish(exp, summary, args, reference=reacher.PAPER_SECONDS,
-                  title=f"Timing ({TASK}, seed {args.seed})",
-                  figures=lambda: reacher.figures(exp, "damaged reacher"))
-
+from pilco.tasks.reacher import DAMAGED_REACHER  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # the four steps of examples/reacher.py (parse, experiment, run, finish) in one call:
+    # the damaged Fetch arm, RBF policy, GP dynamics, cost on the gripper
+    sys.exit(DAMAGED_REACHER.main())

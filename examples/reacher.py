@@ -11,28 +11,24 @@ Usage::
     python examples/reacher.py --seed 0
     python examples/reacher.py --resume runs/reacher-seed0 --episodes 6
 """
-import os
 import sys
 
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
+from pilco.runtime import quiet_tensorflow
 
-from pilco.experiment.cli import finish  # noqa: E402
-from pilco.tasks import reacher  # noqa: E402
+quiet_tensorflow()  # before TensorFlow loads: no C++ start-up lines, no CUDA probes on a CPU
 
-TASK = "reacher"
+from pilco.tasks.reacher import REACHER as task  # noqa: E402
 
 
 def main(argv=None) -> int:
     # 1. settings (the paper's defaults; --resume DIR continues a saved run)
-    args = reacher.parse_args(argv)
+    settings = task.parse(argv)
     # 2. the task: Fetch arm, RBF policy, GP dynamics, cost on the gripper position
-    exp = reacher.make_experiment(args, TASK)
+    exp = task.experiment(settings)
     # 3. PILCO: a random episode, then per episode: train GPs, optimise policy, apply it
-    summary = exp.run()
+    summary = task.run(exp, settings)
     # 4. report: tables, figures, the final episode as a GIF (exit 130 after Ctrl-C)
-    return finish(exp, summary, args, reference=reacher.PAPER_SECONDS,
-                  title=f"Timing ({TASK}, seed {args.seed})",
-                  figures=lambda: reacher.figures(exp, TASK.replace("_", " ")))
+    return task.finish(exp, summary, settings)
 
 
 if __name__ == "__main__":

@@ -8,7 +8,9 @@ Sub-modules:
 - :mod:`pilco.rewards`: saturating (exponential), linear, combined and cart-pole rewards.
 - :mod:`pilco.angles`: sin/cos augmentation of angle dimensions under a Gaussian
   (:mod:`pilco.features`: the same features of known states, with NumPy).
-- :mod:`pilco.persistence`: saving and loading agents, exporting policies.
+- saving: ``agent.save(path)`` and ``PILCO.load(path)`` (an agent, to continue learning),
+  ``agent.export_policy(path)`` (the policy alone, for :mod:`pilco.deploy`); the file
+  layout is :mod:`pilco.models.storage`.
 - :mod:`pilco.envs`: gymnasium environments of the paper (cart-pole, Fetch joint reacher).
 - :mod:`pilco.deploy`: NumPy-only policy evaluation for robots (no TensorFlow import).
 """

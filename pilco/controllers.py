@@ -24,6 +24,7 @@ from . import moments as gp_moments
 from .seeding import generator
 from .validation import (
     as_2d_float,
+    check_callable,
     check_gaussian,
     check_matrix,
     check_max_action,
@@ -243,8 +244,7 @@ class RbfController(_SquashedController):
         [n, d] states to [n, state_dim] policy inputs, e.g. an angle to its sine and
         cosine), a state of the features' domain.
         """
-        if features is not None and not callable(features):
-            raise TypeError(f"features must be callable, got {type(features).__name__}")
+        check_callable(features, "features")
         dim = self.state_dim if features is None else int(np.size(mean))
         mean = check_state_row(mean, dim, "mean")[0]
         std = check_non_negative_float(std, "std")

@@ -1,7 +1,8 @@
 """Evaluate an exported PILCO policy with NumPy alone: no TensorFlow or GPflow on the robot.
 
-Export a trained agent's policy with ``agent.export_policy("policy.npz")`` (or
-:func:`pilco.persistence.export_policy`), copy the file to the robot, then::
+Export a trained agent's policy with ``agent.export_policy("policy.npz")`` (a controller
+used without an agent: :func:`pilco.models.storage.export_policy`), copy the file to the
+robot, then::
 
     from pilco.deploy import load_policy
 
@@ -187,7 +188,7 @@ def load_policy(path) -> Policy:
     if meta.get("format") != POLICY_FORMAT:
         raise ValueError(f"{path} holds format {meta.get('format')!r}, expected "
                          f"{POLICY_FORMAT!r} (agent files are read with "
-                         f"pilco.persistence.load_agent)")
+                         f"pilco.models.PILCO.load)")
     check_format_version(meta, path, "policy", POLICY_VERSION, "this reader")
 
     def get(key: str, default: Optional[np.ndarray] = None):

@@ -28,6 +28,7 @@ __all__ = [
     "plot_cost_prediction",
     "plot_one_step",
     "plot_multi_step",
+    "plot_targets",
     "save_frames",
     "save_all",
 ]
@@ -89,6 +90,35 @@ def plot_distances(distances: Sequence[np.ndarray], path: str,
     ax.legend(fontsize=8, ncol=2 if n > 6 else 1)
     if title:
         ax.set_title(title)
+    return _save(fig, path)
+
+
+def plot_targets(training: Sequence[Sequence[float]], test: Sequence[Sequence[float]],
+                 steps: Sequence[Optional[int]], path: str, within: int) -> str:
+    """A multi-task run's targets in two projections (x-y from above, x-z from the side):
+    the training targets as black crosses, each held-out test target as a dot coloured by
+    the steps the final policy took to reach it (grey ring: not reached within
+    ``within`` steps). ``training`` [T, 3], ``test`` [K, 3], ``steps`` [K] (None: not
+    reached)."""
+    train, tests = np.asarray(training, dtype=float), np.asarray(test, dtype=float)
+    ok = np.array([n is not None and n <= within for n in steps], dtype=bool)
+    fig = _figure(9, 4.2)
+    for k, (i, j, name) in enumerate(((0, 1, "y [m]"), (0, 2, "z [m]"))):
+        ax = fig.add_subplot(1, 2, k + 1)
+        dots = ax.scatter(tests[ok, i], tests[ok, j], c=[steps[m] for m in np.flatnonzero(ok)],
+                          cmap="viridis", vmin=0, vmax=within, s=40, label="test, reached")
+        ax.scatter(tests[~ok, i], tests[~ok, j], facecolors="none", edgecolors="0.5", s=50,
+                   label=f"test, not within {within} steps")
+        ax.scatter(train[:, i], train[:, j], marker="x", color="k", s=60, label="training")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel(name)
+        ax.grid(alpha=0.3)
+        if k == 0:
+            ax.legend(fontsize=8)
+        else:
+            fig.colorbar(dots, ax=ax, label="steps to the target")
+    fig.suptitle(f"held-out targets reached within {within} steps: {int(ok.sum())} of "
+                 f"{len(tests)}")
     return _save(fig, path)
 
 

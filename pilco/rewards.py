@@ -22,14 +22,16 @@ from .validation import (
     check_entries,
     check_gaussian,
     check_indices,
+    check_matrix,
     check_positive_float,
     check_positive_int,
+    check_reward,
     check_reward_list,
     check_weight_matrix,
 )
 
 __all__ = ["ExponentialReward", "AxisBumpsReward", "LinearReward", "CombinedRewards",
-           "CartPoleReward"]
+           "CartPoleReward", "LinearMapReward", "difference_map"]
 
 
 def _exp_reward_moments(m, s, W, t):
@@ -206,3 +208,61 @@ class CartPoleReward(_Reward):
         M6 = tf.concat([m, Mt], axis=1)
         S6 = tf.concat([tf.concat([s, cross], 1), tf.concat([tf.transpose(cross), St], 1)], 0)
         return _exp_reward_moments(M6, S6, self._W, self._t)
+
+
+def difference_map(state_dim: int, first: Sequence[int], second: Sequence[int]) -> np.ndarray:
+    """The matrix A [K, D] with ``A x = x[first] - x[second]`` (K = len(first)), e.g. the
+    gripper position minus the target held in context dimensions:
+    ``difference_map(13, [0, 1, 2], [10, 11, 12]) = [I3, 0, -I3]``. The two index lists
+    must have the same length and may not share an index at the same position."""
+    D = check_positive_int(state_dim, "state_dim")
+    first = check_indices(first, D, "first")
+    second = check_indices(second, D, "second")
+    if len(first) != len(second) or not first:
+        raise ValueError(f"first and second must name as many dimensions (at least one), "
+                         f"got {len(first)} and {len(second)}")
+    if any(a == b for a, b in zip(first, second)):
+        raise ValueError(f"first and second pair a dimension with itself: {first} - {second}")
+    A = np.zeros((len(first), D))
+    A[np.arange(len(first)), first] = 1.0
+    A[np.arange(len(first)), second] = -1.0
+    return A
+
+
+class LinearMapReward(_Reward):
+    """A reward of a linear map of the state: ``base_reward(A x + b)``.
+
+    E.g. a saturating reward on the distance between a gripper and a target that is part
+    of the state (a multi-task policy's context): ``A = [I3, 0, -I3]`` picks the gripper
+    position minus the target (:func:`difference_map`), ``base_reward`` is an
+    :class:`ExponentialReward` on 3 dimensions with target 0.
+
+    For ``x ~ N(m, s)`` the map ``z = A x + b`` is Gaussian, ``N(A m + b, A s A^T)``
+    exactly, so the moments are the base reward's closed form at that Gaussian (exact
+    when the base reward's are; ``A s A^T`` may be singular, e.g. a gripper at a known
+    distance from the target). The gradient with respect to ``m`` and ``s`` flows
+    through the map by automatic differentiation, as for every reward here.
+
+    Shapes: ``A`` [K, D] with D = ``state_dim``, ``b`` [K] (default zeros),
+    ``base_reward.state_dim == K``; :meth:`moments` m [1, D], s [D, D] -> mean [1, 1],
+    variance [1, 1]. ``A`` and ``b`` are non-trainable parameters that can be
+    reassigned.
+    """
+
+    def __init__(self, state_dim: int, base_reward: Reward, A, b=None):
+        super().__init__()
+        self.state_dim = D = check_positive_int(state_dim, "state_dim")
+        self.base_reward = check_reward(base_reward, name="base_reward")
+        K = self.base_reward.state_dim
+        A = check_matrix(A, (K, D), f"A (the map from the {D}-dimensional state to the "
+                                    f"base reward's {K} dimensions)")
+        b = np.zeros(K) if b is None else check_entries(b, K, "b")
+        self.A = gpflow.Parameter(A, trainable=False)
+        self.b = gpflow.Parameter(b.reshape(1, K), trainable=False)
+
+    def moments(self, m, s):
+        A = tf.convert_to_tensor(self.A)
+        mz = tf.matmul(m, A, transpose_b=True) + tf.convert_to_tensor(self.b)  # [1, K]
+        sz = tf.matmul(A, tf.matmul(s, A, transpose_b=True))  # [K, K]
+        # symmetric to rounding, as the solves and log-determinants downstream expect
+        return self.base_reward.moments(mz, 0.5 * (sz + tf.transpose(sz)))

@@ -2,6 +2,9 @@
 found, the adapter of a progress callback to GPflow's step callback, and the early stop of
 a run whose loss has stalled.
 
+Snapshots live in memory only, for the length of a search (or to copy values between
+two models); an agent is saved to a file with ``agent.save`` (:mod:`pilco.models.storage`).
+
 Values are copied in the optimiser's (unconstrained) space: a constrained value that sits
 on its bound (a noise variance at its floor) would not survive the round trip through
 the constraining transform, whereas the unconstrained value restores it exactly.

@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 
 from pilco.controllers import LinearController
-from pilco.experiment import Experiment, ExperimentConfig
+from pilco.experiment import Experiment, ExperimentConfig, stack_transitions
 from pilco.models import PILCO
 from pilco.rewards import ExponentialReward
-from pilco.tasks import adaptation
+from pilco.tasks import adaptation, adaptation_model
+from pilco.tasks.adaptation import ADAPTATION
 
 
 class PlaneEnv(gymnasium.Env):
@@ -71,13 +72,14 @@ def damaged_run(tmp_path):
     cfg = ExperimentConfig(task="plane", env_id="unused", seed=1, episodes=4,
                            random_episodes=2, steps=25, random_action_scale=0.3,
                            predictions=False, quiet=True, render=False)
-    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv)
+    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
+                     model_data=adaptation_model.damaged_arm_data)
     PlaneEnv.broken = False
     try:
         exp.run_random_episode()
         exp.run_random_episode()
         exp.agent.optimize_models(maxiter=200)
-        exp.older_noise_scale, exp.older_before_episode = 100.0, 3  # as adaptation.run
+        exp.task_state.update(older_noise_scale=100.0, older_before_episode=3)  # as run
         PlaneEnv.broken = True
         exp.run_random_episode()  # the first damaged episode (random here)
     finally:
@@ -91,21 +93,21 @@ def test_the_dimension_the_damage_changed_forgets_the_healthy_data(damaged_run):
     # before the choice: every output down-weights the healthy data alike
     np.testing.assert_array_equal(exp.agent.mgpr.noise_scales,
                                   np.r_[np.full(healthy, 100.0), np.ones(25)])
-    adaptation.per_output_noise(exp, args(), first=3)
+    adaptation_model.per_output_noise(exp, args(), first=3)
     z2 = exp.summary_fields["output_disagreement"]
     # the healthy model predicts the first coordinate moving by u; it stood still
     assert z2[0] > 1e3 and z2[1] < 10.0, z2
-    assert exp.older_noise_scale == [1e6, 100.0]
+    assert exp.task_state["older_noise_scale"] == [1e6, 100.0]
     want = np.stack([np.r_[np.full(healthy, 1e6), np.ones(25)],
                      np.r_[np.full(healthy, 100.0), np.ones(25)]])
     np.testing.assert_array_equal(exp.agent.mgpr.noise_scales, want)  # [D, N]
     # chosen once: a later call (every damaged episode calls it) changes nothing
-    exp.older_noise_scale = 7.0
-    adaptation.per_output_noise(exp, args(changed_output_noise=5.0), first=3)
-    assert exp.older_noise_scale == 7.0
+    exp.task_state["older_noise_scale"] = 7.0
+    adaptation_model.per_output_noise(exp, args(changed_output_noise=5.0), first=3)
+    assert exp.task_state["older_noise_scale"] == 7.0
     # the stuck coordinate's model now predicts it standing still where the healthy
     # data said it moves
-    exp.older_noise_scale = [1e6, 100.0]
+    exp.task_state["older_noise_scale"] = [1e6, 100.0]
     exp.give_agent_data(exp.agent)
     exp.agent.optimize_models(maxiter=200)
     X = np.array([[0.0, 0.0, 0.3, 0.3]])
@@ -116,18 +118,18 @@ def test_the_dimension_the_damage_changed_forgets_the_healthy_data(damaged_run):
 def test_the_disagreement_is_about_one_where_the_model_knew_the_dynamics(damaged_run):
     exp = damaged_run
     healthy = [e.transitions() for e in exp.episodes[:2]]
-    z2 = adaptation.output_disagreement(exp.agent, healthy[0], healthy[1])
+    z2 = adaptation_model.output_disagreement(exp.agent, healthy[0], healthy[1])
     assert np.all(z2 < 10.0), z2
     # without the option, or before the damaged episode, nothing is chosen
     for a, first in ((args(changed_output_noise=None), 3), (args(), 4)):
-        adaptation.per_output_noise(exp, a, first=first)
+        adaptation_model.per_output_noise(exp, a, first=first)
         assert "output_disagreement" not in exp.summary_fields
-        assert exp.older_noise_scale == 100.0
+        assert exp.task_state["older_noise_scale"] == 100.0
 
 
 def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
     exp = damaged_run
-    adaptation.per_output_noise(exp, args(), first=3)
+    adaptation_model.per_output_noise(exp, args(), first=3)
     exp.save_progress()
     agents = []
 
@@ -135,8 +137,9 @@ def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
         agents.append(build(data, start_states))
         return agents[-1]
 
-    resumed = Experiment.resume(exp.directory, exp.config, rebuild, make_env=PlaneEnv)
-    assert resumed.older_noise_scale == [1e6, 100.0]
+    resumed = Experiment.resume(exp.directory, exp.config, rebuild, make_env=PlaneEnv,
+                                model_data=adaptation_model.damaged_arm_data)
+    assert resumed.task_state["older_noise_scale"] == [1e6, 100.0]
     np.testing.assert_array_equal(resumed.agent.mgpr.noise_scales,
                                   exp.agent.mgpr.noise_scales)
     assert resumed.summary_fields["output_disagreement"] == \
@@ -152,7 +155,7 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
     ``--stop-stuck-joints`` the second one no longer commands the stuck coordinate).
     Replaying the learning up to a damaged episode (the diagnosis of an earlier episode)
     gives the policy that ran it only with the task's replay hook."""
-    from pilco.experiment.reconstruct import action_error, replay_learning
+    from pilco.diagnose.replay import action_error, replay_learning
 
     cfg = ExperimentConfig(task="plane", env_id="unused", seed=2, episodes=4,
                            random_episodes=1, steps=8, random_action_scale=0.3,
@@ -164,7 +167,8 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
         min_healthy_episodes=1, damaged_cost="all", damage_input=False,
         old_data_noise=100.0, damaged_policy_restarts=restarts, changed_output_noise=None,
         changed_output_threshold=10.0, stop_stuck_joints=stop, stuck_joint_ratio=0.1)
-    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv)
+    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
+                     model_data=adaptation_model.damaged_arm_data)
     exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None}
     exp.before_replayed_episode = adaptation.replay_damage(exp, run_args)
     PlaneEnv.broken = False
@@ -175,7 +179,7 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
     assert summary["damage_at_episode"] == 3 and len(exp.episodes) == 4
     np.testing.assert_array_equal(exp.agent.m_init, [[0.3, -0.2]])
     if stop:
-        assert summary["stuck_joints"] == [0] and exp.inert_actions == [0]
+        assert summary["stuck_joints"] == [0] and exp.task_state["inert_actions"] == [0]
         assert np.all(exp.episodes[2].actions[:, 0] != 0.0)  # sent, with no effect
         np.testing.assert_array_equal(exp.episodes[3].actions[:, 0], 0.0)  # not sent
     else:
@@ -198,7 +202,7 @@ def test_the_disagreement_takes_a_noise_variance_on_its_floor(damaged_run):
     noise.unconstrained_variable.assign(-60.0)
     assert noise.numpy() == exp.agent.mgpr.noise_floor
     healthy = [e.transitions() for e in exp.episodes[:2]]
-    z2 = adaptation.output_disagreement(exp.agent, healthy[0], healthy[1])
+    z2 = adaptation_model.output_disagreement(exp.agent, healthy[0], healthy[1])
     assert np.all(np.isfinite(z2)) and z2.shape == (2,)
 
 
@@ -211,16 +215,17 @@ def stuck_args(**kw):
 def test_a_stuck_joint_is_no_longer_commanded(damaged_run):
     exp = damaged_run
     healthy = 50  # transitions of the two healthy episodes
-    ratios = adaptation.joint_follow_ratios(exp.episodes[:2], PlaneEnv.joint_dims)
+    ratios = adaptation_model.joint_follow_ratios(exp.episodes[:2], PlaneEnv.joint_dims)
     np.testing.assert_allclose(ratios, 1.0, rtol=1e-9)  # x' = x + u, no limits
     sent = exp.episodes[2].actions[:, 0].copy()
     assert np.all(sent != 0.0)
     for a in (stuck_args(stop_stuck_joints=False), stuck_args()):
-        adaptation.stop_stuck_joints(exp, a, first=4)  # before the first damaged episode
-        assert "stuck_joints" not in exp.summary_fields and exp.inert_actions == []
-    adaptation.stop_stuck_joints(exp, stuck_args(), first=3)
+        adaptation_model.stop_stuck_joints(exp, a, first=4)  # before the first damaged episode
+        assert "stuck_joints" not in exp.summary_fields
+        assert exp.task_state["inert_actions"] == []
+    adaptation_model.stop_stuck_joints(exp, stuck_args(), first=3)
     fields = exp.summary_fields
-    assert fields["stuck_joints"] == [0] and exp.inert_actions == [0]
+    assert fields["stuck_joints"] == [0] and exp.task_state["inert_actions"] == [0]
     assert fields["joint_follow_ratio"][0] == 0.0
     assert fields["joint_follow_ratio"][1] == pytest.approx(1.0)
     agent = exp.agent
@@ -240,43 +245,91 @@ def test_a_stuck_joint_is_no_longer_commanded(damaged_run):
     m, _, _ = agent.predict(np.array([[0.3, -0.2]]), 0.01 * np.eye(2), 3)
     assert abs(m[0, 0] - 0.3) < 0.03, m
     # found once: later calls (after every damaged episode) keep the choice
-    exp.inert_actions = [0]
-    adaptation.stop_stuck_joints(exp, stuck_args(stuck_joint_ratio=2.0), first=3)
+    exp.task_state["inert_actions"] = [0]
+    adaptation_model.stop_stuck_joints(exp, stuck_args(stuck_joint_ratio=2.0), first=3)
     assert fields["stuck_joints"] == [0]
 
 
 def test_a_healthy_joint_stays_commanded_and_the_flags_exclude_each_other(damaged_run):
     exp = damaged_run
-    ratios = adaptation.joint_follow_ratios(exp.episodes[2:], PlaneEnv.joint_dims)
+    ratios = adaptation_model.joint_follow_ratios(exp.episodes[2:], PlaneEnv.joint_dims)
     # a joint that never followed its commands on the healthy arm is not called stuck;
     # one that did in any healthy episode is (a joint may sit at a limit for a whole one)
-    assert adaptation.stuck_joints(exp.episodes[2:], exp.episodes[2:], 0.1,
+    assert adaptation_model.stuck_joints(exp.episodes[2:], exp.episodes[2:], 0.1,
                                    PlaneEnv.joint_dims) == []
     for healthy in (exp.episodes[:2], exp.episodes[1:]):
-        assert adaptation.stuck_joints(healthy, exp.episodes[2:], 0.1,
+        assert adaptation_model.stuck_joints(healthy, exp.episodes[2:], 0.1,
                                        PlaneEnv.joint_dims) == [0]
-    assert ratios[0] == 0.0 and np.isnan(adaptation.joint_follow_ratios(
+    assert ratios[0] == 0.0 and np.isnan(adaptation_model.joint_follow_ratios(
         [exp.episodes[2]], (1, 0))).sum() == 0
     out = ["--output", str(exp.directory) + "-x"]
-    assert adaptation.parse_args(out).stop_stuck_joints  # the default
-    assert not adaptation.parse_args(["--no-stop-stuck-joints", *out]).stop_stuck_joints
+    assert ADAPTATION.parse(out).stop_stuck_joints  # the default
+    assert not ADAPTATION.parse(["--no-stop-stuck-joints", *out]).stop_stuck_joints
     # the paper code's arm reports commanded angles, which follow a stuck joint's commands
-    paper = adaptation.parse_args(["--preset", "paper-code", *out])
+    paper = ADAPTATION.parse(["--preset", "paper-code", *out])
     assert paper.joint_state == "commanded" and not paper.stop_stuck_joints
-    assert adaptation.parse_args(["--no-stop-stuck-joints", "--changed-output-noise", "1e6",
+    assert ADAPTATION.parse(["--no-stop-stuck-joints", "--changed-output-noise", "1e6",
                                   *out]).changed_output_noise == 1e6
     for clash in (["--changed-output-noise", "1e6"], ["--joint-state", "commanded"]):
         with pytest.raises(SystemExit):
-            adaptation.parse_args([*clash, *out])
+            ADAPTATION.parse([*clash, *out])
 
 
 def test_a_resumed_run_keeps_the_stuck_joint_stopped(damaged_run):
     exp = damaged_run
-    adaptation.stop_stuck_joints(exp, stuck_args(), first=3)
+    adaptation_model.stop_stuck_joints(exp, stuck_args(), first=3)
     exp.save()
-    resumed = Experiment.resume(exp.directory, exp.config, build, make_env=PlaneEnv)
-    assert resumed.inert_actions == [0] and resumed.inert_from_episode == 3
+    resumed = Experiment.resume(exp.directory, exp.config, build, make_env=PlaneEnv,
+                                model_data=adaptation_model.damaged_arm_data)
+    assert (resumed.task_state["inert_actions"], resumed.task_state["inert_from_episode"]) == (
+        [0], 3)
     np.testing.assert_array_equal(resumed.training_data()[0], exp.training_data()[0])
-    adaptation.stop_stuck_joints(resumed, stuck_args(), first=3)  # as adaptation.run does
+    adaptation_model.stop_stuck_joints(resumed, stuck_args(), first=3)  # as adaptation.run does
     np.testing.assert_array_equal(resumed.agent.controller.max_action, [0.0, 1.0])
     np.testing.assert_array_equal(resumed.agent.data[0], exp.agent.data[0])
+
+
+def _episode(steps, start):
+    from pilco.experiment import Episode
+
+    states = start + np.arange(steps + 1, dtype=float)[:, None] * np.ones((1, 2))
+    return Episode(states=states, actions=np.full((steps, 2), 0.5), rewards=np.zeros(steps),
+                   distances=np.zeros(steps + 1))
+
+
+@pytest.mark.parametrize("train_from, max_data", [(1, None), (2, None), (1, 9)])
+def test_older_episodes_are_down_weighted_against_newer_ones_only(train_from, max_data):
+    """The adaptation's choice of model data: from ``train_from_episode`` on, the first
+    ``max_data``; the episodes before ``older_before_episode`` (the healthy arm's) get
+    ``older_noise_scale``, unless no later transition is among them."""
+    from types import SimpleNamespace
+
+    episodes = [_episode(4, 0.0), _episode(3, 10.0)]
+    record = SimpleNamespace(episodes=episodes, config=SimpleNamespace(max_data=max_data),
+                             task_state=dict(older_noise_scale=50.0, older_before_episode=3,
+                                             train_from_episode=train_from))
+    old = [e.steps for e in episodes][train_from - 1:]
+    X, Y, scales = adaptation_model.damaged_arm_data(record)
+    # no transition of episode 3 or later yet: nothing to weigh against, all ones
+    np.testing.assert_array_equal(scales, np.ones(len(X)))
+    assert len(X) == min(sum(old), max_data or 99)
+    episodes.append(_episode(2, 20.0))
+    X, Y, scales = adaptation_model.damaged_arm_data(record)
+    want = np.r_[np.full(sum(old), 50.0), np.ones(2)][:max_data]
+    if not np.any(want == 1.0):  # max_data keeps old transitions only
+        want = np.ones_like(want)
+    np.testing.assert_array_equal(scales, want)
+    assert len(X) == len(Y) == len(want)
+    np.testing.assert_array_equal(X[0], stack_transitions(episodes[train_from - 1:])[0][0])
+    # one factor per output dimension: [D, N]
+    record.task_state["older_noise_scale"] = [50.0, 2.0]
+    scales = adaptation_model.damaged_arm_data(record)[2]
+    assert scales.shape == (2, len(want))
+    # inert actions read as 0 from their episode on; the episodes keep what was sent
+    record.task_state.update(inert_actions=[1], inert_from_episode=3)
+    X, _, _ = adaptation_model.damaged_arm_data(record)
+    n = len(X)
+    if max_data is None:
+        np.testing.assert_array_equal(X[-2:, 2 + 1], 0.0)
+        np.testing.assert_array_equal(X[:n - 2, 2 + 1], 0.5)
+    assert np.all(episodes[2].actions == 0.5)

@@ -1,4 +1,5 @@
-"""Exported policies (pilco.persistence.export_policy) evaluated by pilco.deploy with NumPy."""
+"""Exported policies (PILCO.export_policy, and storage.export_policy for a bare controller)
+evaluated by pilco.deploy with NumPy."""
 import json
 import os
 import subprocess
@@ -11,8 +12,7 @@ import pytest
 
 from pilco.controllers import LinearController, RbfController, squash_sat, squash_sin
 from pilco.deploy import Policy, load_policy
-from pilco.models import PILCO
-from pilco.persistence import export_policy
+from pilco.models import PILCO, storage
 from pilco.rewards import ExponentialReward
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,7 +73,7 @@ def test_same_actions_as_compute_action(tmp_path, case, U):
 
 def test_a_bare_controller_can_be_exported(tmp_path):
     controller = RbfController(2, 1, 5, max_action=3.0, seed=4)
-    export_policy(controller, tmp_path / "policy.npz")
+    storage.export_policy(controller, tmp_path / "policy.npz", controller.state_dim, [])
     policy = load_policy(tmp_path / "policy.npz")
     x = np.array([0.3, -0.7])
     m, _, _ = controller.compute_action(x.reshape(1, -1), np.zeros((2, 2)))
@@ -124,7 +124,7 @@ def test_importing_deploy_does_not_import_tensorflow(tmp_path):
 @pytest.fixture(scope="module")
 def policy(tmp_path_factory):
     path = tmp_path_factory.mktemp("policy") / "policy.npz"
-    export_policy(make_agent("linear", squash_sin, (1,)), path)
+    make_agent("linear", squash_sin, (1,)).export_policy(path)
     return load_policy(path)
 
 
@@ -145,7 +145,7 @@ def test_bad_states_are_rejected(policy, state, error, match):
 
 def test_bad_files_are_rejected(tmp_path):
     make_agent("linear", None).save(tmp_path / "agent.npz")
-    with pytest.raises(ValueError, match="expected 'pilco-policy'.*load_agent"):
+    with pytest.raises(ValueError, match="expected 'pilco-policy'.*PILCO.load"):
         load_policy(tmp_path / "agent.npz")
     np.savez(tmp_path / "other.npz", a=np.ones(3))
     with pytest.raises(ValueError, match="not a PILCO policy file"):

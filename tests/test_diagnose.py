@@ -1,4 +1,4 @@
-"""The diagnosis of a failed episode (pilco.experiment.diagnose, python -m pilco.diagnose):
+"""The diagnosis of a failed episode (pilco.diagnose, python -m pilco.diagnose):
 on a tiny real run (a point on a line, a real PILCO agent), the verdict rules on synthetic
 numbers, and the distance a saturating cost measures."""
 from __future__ import annotations
@@ -12,11 +12,10 @@ import pytest
 
 from pilco.controllers import RbfController
 from pilco.experiment import Experiment, ExperimentConfig, saturating_cost
-from pilco.experiment.diagnose import VERDICTS, Thresholds, diagnose, verdict, write_diagnosis
-from pilco.experiment.diagnostics import (cost_geometry, distance_moments, mean_dynamics,
-                                          slope_ratio)
-from pilco.experiment.reconstruct import action_error, agent_of_episode
-from pilco.experiment.report import format_diagnosis
+from pilco.diagnose import (VERDICTS, Thresholds, action_error, agent_of_episode, diagnose,
+                            format_report, verdict, write_diagnosis)
+from pilco.diagnose.checks import mean_dynamics
+from pilco.diagnose.geometry import cost_geometry, distance_moments, slope_ratio
 from pilco.models import PILCO
 from pilco.rewards import AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward
 
@@ -112,7 +111,7 @@ def test_diagnose_a_run_directory_writes_every_field(run_dir):
     assert opt["candidates"][1]["pred_cost"] <= opt["run_pred_cost"] + 1e-9
     assert saved["verdict"]["label"] in VERDICTS
     assert verdict(result["facts"]) == result["verdict"]
-    assert "Verdict:" in format_diagnosis(result)
+    assert "Verdict:" in format_report(result)
 
 
 def test_an_earlier_episode_is_replayed_with_the_runs_settings(run_dir):
@@ -127,13 +126,13 @@ def test_an_earlier_episode_is_replayed_with_the_runs_settings(run_dir):
 
 
 def test_the_command_line_prints_the_report_and_writes_the_json(run_dir, tmp_path, capsys):
-    from pilco import diagnose as cli
+    from pilco.diagnose import main
 
     out = tmp_path / "d.json"
     # a run of no known task is reopened through its saved agent (enough for the last
     # episode); its env id is not registered, so the candidates are not rolled out
-    assert cli.main([run_dir, "--restarts", "0", "--output", str(out),
-                     "--log-level", "WARNING"]) == 0
+    assert main([run_dir, "--restarts", "0", "--output", str(out),
+                 "--log-level", "WARNING"]) == 0
     printed = capsys.readouterr().out
     saved = json.loads(out.read_text())
     assert saved["episode"] == 3 and saved["reconstruction"]["source"] == "agent.npz"

@@ -171,8 +171,8 @@ def test_cartpole_resume_continues(runs):
         progress = json.load(f)
     assert progress["episodes_done"] == 3
     assert progress["interrupted"] is False
-    assert progress["args"]["horizon"] == 8  # settings of the first run were kept
-    assert progress["args"]["episodes"] == 3  # ... except those given again
+    assert progress["settings"]["horizon"] == 8  # settings of the first run were kept
+    assert progress["settings"]["episodes"] == 3  # ... except those given again
     assert progress["agent_saved"] is True and (d / "agent.npz").exists()
     before = runs["cartpole_interrupted_summary"]["episodes"]
     after = _load_summary(d)["episodes"]

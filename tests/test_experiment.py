@@ -13,7 +13,7 @@ import gymnasium
 import numpy as np
 import pytest
 
-from pilco.experiment import Experiment, ExperimentConfig, RunStore, rollout
+from pilco.experiment import Experiment, ExperimentConfig, RunStore, rollout, stack_transitions
 from pilco.experiment import signals as run_signals
 
 
@@ -137,45 +137,40 @@ def test_an_unchanged_training_set_is_not_refitted(tmp_path):
     assert agents[0].data[0].shape == (4, 2)
 
 
-def test_training_from_a_later_episode_and_the_success_rule(tmp_path):
-    exp, agents = experiment(tmp_path, success_fn=lambda s: len(s["episodes"]) == 4)
+def test_a_tasks_choice_of_model_data_and_its_state_survive_a_resume(tmp_path):
+    """``model_data`` chooses the model's transitions and their noise factors (before the
+    ``max_data`` cap); ``task_state`` is saved and read back; the success rule applies."""
+    def later_half(record):  # the transitions of episodes >= state["from"], factor 3
+        start = record.task_state.get("from", 1)
+        X, Y = stack_transitions(record.episodes[start - 1:])
+        return X, Y, np.full(len(X), 3.0)
+
+    exp, agents = experiment(tmp_path, config(episodes=4, max_data=5),
+                             success_fn=lambda s: len(s["episodes"]) == 4)
+    exp.model_data = later_half
     exp.run_random_episode()
     exp.run_learned_episode()
-    exp.train_from_episode = 2
+    exp.task_state["from"] = 2
     X, _ = exp.training_data()
-    assert len(X) == exp.episodes[1].steps
+    assert len(X) == min(5, exp.episodes[1].steps)
+    np.testing.assert_array_equal(exp.training_noise_scales(), np.full(len(X), 3.0))
     exp.run_learned_episode()
+    np.testing.assert_array_equal(agents[0].noise_scales, np.full(5, 3.0))  # given
     assert exp.summary()["success"] is False
-    exp.run_learned_episode()
-    assert exp.summary()["success"] is True
-
-
-@pytest.mark.parametrize("train_from, max_data", [(1, None), (2, None), (1, 9)])
-def test_older_episodes_are_down_weighted_against_newer_ones_only(tmp_path, train_from,
-                                                                   max_data):
-    exp, agents = experiment(tmp_path, config(episodes=5, max_data=max_data))
-    exp.run_random_episode()
-    exp.run_learned_episode()
-    exp.older_noise_scale, exp.older_before_episode = 50.0, 3  # e.g. a damage before 3
-    exp.train_from_episode = train_from
-    old = [e.steps for e in exp.episodes][train_from - 1:]
-    # no transition of episode 3 or later yet: nothing to weigh against, all ones
-    np.testing.assert_array_equal(exp.training_noise_scales(),
-                                  np.ones(len(exp.training_data()[0])))
-    exp.run_learned_episode()
-    new = exp.episodes[2].steps
-    want = np.r_[np.full(sum(old), 50.0), np.ones(new)][:max_data]
-    if not np.any(want == 1.0):  # max_data keeps old transitions only
-        want = np.ones_like(want)
-    np.testing.assert_array_equal(exp.training_noise_scales(), want)
-    np.testing.assert_array_equal(agents[0].noise_scales, want)  # what the agent was given
-    assert len(want) == len(exp.training_data()[0])
-    # a resumed run gives its agent the same factors
     base, rebuilt = experiment(tmp_path)
-    resumed = Experiment.resume(exp.directory, config(episodes=5, max_data=max_data),
-                                base.build_agent, make_env=LineEnv)
-    assert (resumed.older_noise_scale, resumed.older_before_episode) == (50.0, 3)
-    np.testing.assert_array_equal(rebuilt[0].noise_scales, want)
+    resumed = Experiment.resume(exp.directory, config(episodes=4, max_data=5),
+                                base.build_agent, make_env=LineEnv, model_data=later_half)
+    assert resumed.task_state == {"from": 2}
+    np.testing.assert_array_equal(rebuilt[0].noise_scales, np.full(5, 3.0))
+    resumed.run_learned_episode()
+    assert resumed.summary()["success"] is True
+    # without a choice: every episode's transitions, factors 1
+    plain, _ = experiment(tmp_path / "plain", config(episodes=3))
+    plain.run_random_episode()
+    plain.run_learned_episode()
+    assert len(plain.training_data()[0]) == sum(e.steps for e in plain.episodes)
+    np.testing.assert_array_equal(plain.training_noise_scales(),
+                                  np.ones(len(plain.training_data()[0])))
 
 
 def test_ctrl_c_in_a_rollout_keeps_its_transitions_and_the_run_resumes(tmp_path):
@@ -223,13 +218,14 @@ def test_resume_reads_progress_written_before_the_typed_fields(tmp_path):
     exp.run_random_episode()
     exp.run_learned_episode()
     progress = json.load(open(exp.store.progress_path))
-    progress.pop("train_from_episode")
+    progress.pop("task_state")
     progress.pop("summary_fields")
+    progress["older_noise_scale"] = 4.0
     progress["extra"] = {"train_from_episode": 2, "summary": {"damage_at_episode": 2}}
     open(exp.store.progress_path, "w").write(json.dumps(progress))
     base, _ = experiment(tmp_path)
     resumed = Experiment.resume(exp.directory, config(), base.build_agent, make_env=LineEnv)
-    assert resumed.train_from_episode == 2
+    assert resumed.task_state == {"train_from_episode": 2, "older_noise_scale": 4.0}
     assert resumed.summary()["damage_at_episode"] == 2
 
 
@@ -390,37 +386,11 @@ def test_the_policy_search_hook_runs_before_each_policy_search(tmp_path):
     assert seen == [(2, 0), (3, 1), (4, 2)]
 
 
-def test_presets_sit_between_the_defaults_and_the_flags_given(tmp_path):
-    import argparse
-
-    from pilco.experiment.cli import (add_common_arguments, add_preset_argument,
-                                      parse_args_with_resume)
-
-    def parser():
-        p = argparse.ArgumentParser()
-        add_common_arguments(p, episodes=4, steps=50, basis_functions=50, policy_iters=25,
-                             model_iters=100, output=str(tmp_path / "run-{seed}"))
-        add_preset_argument(p, {"wide": {"policy_iters": 30, "horizon": 100}})
-        return p
-
-    assert parse_args_with_resume(parser(), []).policy_iters == 25
-    args = parse_args_with_resume(parser(), ["--preset", "wide", "--horizon", "20"])
-    assert (args.policy_iters, args.horizon, args.preset) == (30, 20, "wide")
-    assert "_presets" not in vars(args)
-    # a resumed run keeps its preset and settings; flags given again still win
-    run = tmp_path / "run-0"
-    run.mkdir()
-    (run / "progress.json").write_text(json.dumps({"args": vars(args)}))
-    resumed = parse_args_with_resume(parser(), ["--resume", str(run), "--episodes", "6"])
-    assert (resumed.policy_iters, resumed.horizon, resumed.episodes) == (30, 20, 6)
-    with pytest.raises(ValueError, match="sets unknown flags"):
-        add_preset_argument(argparse.ArgumentParser(), {"bad": {"nope": 1}})
-
-
 def test_the_reacher_paper_code_preset():
     from pilco.tasks import reacher
+    from pilco.tasks.reacher import DAMAGED_REACHER, REACHER
 
-    args = reacher.parse_args(["--preset", "paper-code", "--cost-width", "0.5"], damaged=True)
+    args = DAMAGED_REACHER.parse(["--preset", "paper-code", "--cost-width", "0.5"])
     assert (args.planning_horizon, args.start_var, args.policy_iters, args.policy_iters_first,
             args.max_data) == (100, 0.1, 30, 60, 100)
     assert args.cost_width == 0.5  # a flag given wins over the preset
@@ -429,12 +399,12 @@ def test_the_reacher_paper_code_preset():
     # the published damaged-arm script: 25 steps of up to 0.3 rad
     assert (args.horizon, args.max_action, kw["max_action"]) == (25, 0.3, 0.3)
     assert args.policy_min_rel_improvement == 0.0  # no early stop, as the script
-    config = reacher.make_config(args, "damaged_reacher", damaged=True)
+    config = DAMAGED_REACHER.config(args)
     assert config.steps == 25 and config.env_kwargs["max_episode_steps"] == 25
-    paper = reacher.parse_args(["--preset", "paper-code"])  # one cost, as the paper's code
+    paper = REACHER.parse(["--preset", "paper-code"])  # one cost, as the paper's code
     assert (paper.cost_width, paper.fine_cost_width, paper.limit_cost) == (1.0, 0.0, 0.0)
     assert (paper.horizon, paper.max_action) == (50, 0.1)  # the healthy script's
-    healthy = reacher.parse_args([])
+    healthy = REACHER.parse([])
     assert healthy.preset is None
     assert reacher.env_kwargs(healthy, False)["joint_state"] == "measured"
 

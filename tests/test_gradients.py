@@ -21,10 +21,30 @@ import tensorflow as tf
 from pilco import moments
 from pilco.controllers import LinearController, RbfController, squash_sat, squash_sin
 from pilco.models import MGPR, PILCO
+from pilco.moments import pairs as moment_pairs
 from pilco.rewards import ExponentialReward
 
 H_FD = 1e-5
 RTOL = 1e-5
+
+
+def check_against_differences(p, variables, grads):
+    """Each of ``grads`` (the policy loss's gradient) against central differences of
+    ``p._rollout.policy_loss()`` in every entry of its variable (restored after)."""
+    for var, grad in zip(variables, grads):
+        grad = np.asarray(tf.convert_to_tensor(grad).numpy())
+        v0 = var.numpy().copy()
+        fd = np.zeros(v0.size)
+        for i in range(v0.size):
+            step = np.zeros(v0.size)
+            step[i] = H_FD
+            var.assign((v0.ravel() + step).reshape(v0.shape))
+            up = float(p._rollout.policy_loss().numpy())
+            var.assign((v0.ravel() - step).reshape(v0.shape))
+            down = float(p._rollout.policy_loss().numpy())
+            fd[i] = (up - down) / (2 * H_FD)
+        var.assign(v0)
+        assert_grad_close(grad.ravel(), fd, f"d loss / d {var.name}")
 
 
 def assert_grad_close(analytic, numeric, name):
@@ -99,20 +119,7 @@ def test_policy_objective_gradient_matches_finite_differences(kind, squash, angl
     loss0 = float(loss.numpy())
     assert np.isfinite(loss0) and -5.0 <= loss0 < 0.0  # five rewards in (0, 1]
 
-    for var, grad in zip(variables, grads):
-        grad = np.asarray(tf.convert_to_tensor(grad).numpy())
-        v0 = var.numpy().copy()
-        fd = np.zeros(v0.size)
-        for i in range(v0.size):
-            step = np.zeros(v0.size)
-            step[i] = H_FD
-            var.assign((v0.ravel() + step).reshape(v0.shape))
-            up = float(p._rollout.policy_loss().numpy())
-            var.assign((v0.ravel() - step).reshape(v0.shape))
-            down = float(p._rollout.policy_loss().numpy())
-            fd[i] = (up - down) / (2 * H_FD)
-        var.assign(v0)
-        assert_grad_close(grad.ravel(), fd, f"d loss / d {var.name}")
+    check_against_differences(p, variables, grads)
     # restoring the variables restores the objective
     assert float(p._rollout.policy_loss().numpy()) == pytest.approx(loss0, rel=1e-12)
 
@@ -240,7 +247,7 @@ def test_grouped_pair_block_equals_one_group(monkeypatch, groups):
     w = [rng.standard_normal(shape) for shape in ((1, 5), (5, 5), (3, 5))]
     results = []
     for threads in (1, groups):
-        monkeypatch.setattr(moments, "_parallel_threads", lambda: threads)
+        monkeypatch.setattr(moment_pairs, "_parallel_threads", lambda: threads)
         assert len(moments.pair_groups(15, 5)) == threads
         m, s = tf.Variable(M_IN), tf.Variable(S_IN)
         with tf.GradientTape() as tape:

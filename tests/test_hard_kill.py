@@ -30,7 +30,7 @@ import pytest
 from pilco import files
 from pilco.experiment import Experiment
 from pilco.files import write_npz_atomic
-from pilco.tasks import adaptation
+from pilco.tasks import adaptation, adaptation_model
 
 from test_experiment import LineEnv, StandInAgent, config
 
@@ -106,6 +106,7 @@ class LineTask:
 
     env = LineEnv
     cfg = config(episodes=3)
+    model_data = None  # the task's choice of model data (Experiment's ``model_data``)
 
     def __init__(self, built):
         self.built = built  # every agent the runs built
@@ -115,10 +116,12 @@ class LineTask:
         return self.built[-1]
 
     def new(self, directory):
-        return Experiment(self.cfg, str(directory), self.build, make_env=self.env)
+        return Experiment(self.cfg, str(directory), self.build, make_env=self.env,
+                          model_data=self.model_data)
 
     def resume(self, directory):
-        return Experiment.resume(str(directory), self.cfg, self.build, make_env=self.env)
+        return Experiment.resume(str(directory), self.cfg, self.build, make_env=self.env,
+                                 model_data=self.model_data)
 
     def run(self, exp):
         return exp.run()
@@ -138,8 +141,9 @@ class AdaptationTask(LineTask):
                               damaged_policy_restarts=1, changed_output_noise=None,
                               changed_output_threshold=10.0, stop_stuck_joints=False,
                               stuck_joint_ratio=0.1)
+    model_data = staticmethod(adaptation_model.damaged_arm_data)
 
-    def _fields(self, exp):  # as adaptation.make_experiment
+    def _fields(self, exp):  # as AdaptationTask.hooks and .prepare
         exp.success_fn = adaptation.recovered_within(adaptation.RECOVER_WITHIN)
         exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None,
                               **exp.summary_fields}

@@ -1,4 +1,5 @@
-"""Saving and loading agents (pilco.persistence): exact round trips, atomic writes, errors."""
+"""Saving and loading agents (PILCO.save, PILCO.load): exact round trips, atomic writes,
+errors."""
 import json
 import os
 import subprocess
@@ -10,7 +11,6 @@ import gpflow
 import numpy as np
 import pytest
 
-from pilco import persistence
 from pilco.controllers import LinearController, RbfController, squash_sat, squash_sin
 from pilco.models import MGPR, PILCO, SMGPR
 from pilco.rewards import (AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward,
@@ -105,8 +105,8 @@ def test_round_trip_in_a_fresh_process_is_exact(tmp_path):
 def test_load_restores_every_setting_and_parameter(tmp_path):
     for agent in (rbf_agent(), sparse_agent()):
         path = tmp_path / "agent.npz"
-        persistence.save_agent(agent, path)
-        back = persistence.load_agent(path)
+        agent.save(path)
+        back = PILCO.load(path)
         assert type(back.controller) is type(agent.controller)
         assert type(back.mgpr) is type(agent.mgpr)
         assert back.controller.squash is agent.controller.squash
@@ -246,13 +246,14 @@ def test_load_rejects_other_files(tmp_path):
     np.savez(tmp_path / "newer.npz", **arrays)
     with pytest.raises(ValueError, match="version 99"):
         PILCO.load(tmp_path / "newer.npz")
-    # no pilco wrote format versions other than 1: older, odd or missing ones are refused
+    # no pilco wrote format versions other than 1 and 2: older, odd or missing ones are
+    # refused
     for version in (0, -1, "1", 1.0, True):
         meta["version"] = version
         arrays["__meta__"] = np.array(json.dumps(meta))
         np.savez(tmp_path / "other.npz", **arrays)
         with pytest.raises(ValueError, match=f"agent format version {version!r} .*written by "
-                                             r"pilco .*reads agent format version 1$"):
+                                             r"pilco .*reads agent format versions 1 to 2$"):
             PILCO.load(tmp_path / "other.npz")
     # another pilco release writing the same format version: read as ours
     meta.update(version=1, pilco_version="0.0.1")

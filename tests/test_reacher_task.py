@@ -7,7 +7,10 @@ import numpy as np
 import pytest
 
 from pilco.rewards import CombinedRewards, ExponentialReward
-from pilco.tasks import reacher
+from pilco.tasks import reacher, reacher_agent
+from pilco.tasks.adaptation import ADAPTATION
+from pilco.tasks.reacher import DAMAGED_REACHER, REACHER
+from pilco.tasks.settings import settings_to_dict
 
 # the Fetch arm's limits (pilco/envs/fetch_model.py); rolls are unlimited
 LIMITS = np.array([[-1.6056, 1.6056], [-1.221, 1.518], [-np.inf, np.inf], [-2.251, 2.251],
@@ -15,7 +18,7 @@ LIMITS = np.array([[-1.6056, 1.6056], [-1.221, 1.518], [-np.inf, np.inf], [-2.25
 
 
 def test_one_bump_per_finite_limit_on_its_joint():
-    bumps = reacher.limit_bumps(10, LIMITS, 0.1)
+    bumps = reacher_agent.limit_bumps(10, LIMITS, 0.1)
     centres = sorted(zip(bumps.dims, bumps.t.numpy()))
     expected = sorted((3 + j, v) for j in (0, 1, 3, 5) for v in LIMITS[j])
     assert [c[0] for c in centres] == [e[0] for e in expected]
@@ -23,14 +26,14 @@ def test_one_bump_per_finite_limit_on_its_joint():
     # each looks at one joint angle only, with width 0.1 rad and weight 1
     np.testing.assert_allclose(bumps.widths.numpy(), 0.1)
     np.testing.assert_allclose(bumps.coefs.numpy(), 1.0)
-    assert reacher.limit_bumps(10, np.full((7, 2), np.inf) * [-1, 1], 0.1) is None
+    assert reacher_agent.limit_bumps(10, np.full((7, 2), np.inf) * [-1, 1], 0.1) is None
 
 
 def test_the_bumps_lower_the_reward_near_a_limit_only():
     D = 10
     target = np.zeros((1, D))
     position = ExponentialReward(D, np.diag([1.0] * 3 + [0.0] * 7), target)
-    bumps = reacher.limit_bumps(D, LIMITS, 0.1)
+    bumps = reacher_agent.limit_bumps(D, LIMITS, 0.1)
     reward = CombinedRewards(D, [position, bumps], [1.0, -0.5])
     s = 1e-6 * np.eye(D)
 
@@ -62,7 +65,7 @@ def test_the_bumps_lower_the_reward_near_a_limit_only():
 ])
 def test_bad_flags_are_refused_by_name(argv, message, capsys, tmp_path):
     with pytest.raises(SystemExit) as exc:
-        reacher.parse_args([*argv, "--output", str(tmp_path)])
+        REACHER.parse([*argv, "--output", str(tmp_path)])
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
 
@@ -78,7 +81,7 @@ def test_a_sweep_refuses_bad_task_values_before_ray(tmp_path):
 
 
 def test_good_flags_pass():
-    args = reacher.parse_args(["--limit-cost", "0.1", "--fine-cost-width", "0"])
+    args = REACHER.parse(["--limit-cost", "0.1", "--fine-cost-width", "0"])
     assert args.limit_cost == 0.1 and args.limit_cost_weight == 0.5
 
 
@@ -87,8 +90,8 @@ def tiny_agent(argv):
     rng = np.random.default_rng(0)
     X, Y = rng.normal(size=(12, 17)), 0.01 * rng.normal(size=(12, 10))
     start = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
-    args = reacher.parse_args([*argv, "--basis-functions", "3"])
-    return reacher.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)((X, Y), start)
+    args = REACHER.parse([*argv, "--basis-functions", "3"])
+    return reacher_agent.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)((X, Y), start)
 
 
 def test_the_default_agent_has_the_limit_bumps_and_the_paper_preset_not():
@@ -122,9 +125,9 @@ def test_the_policy_starts_near_the_start_state_with_policy_init_var():
 def test_the_schedule_widens_the_main_cost_and_start_variance_early_only():
     argv = ["--early-cost-width", "1.0", "--early-start-var", "0.1", "--early-episodes", "2"]
     agent = tiny_agent(argv)
-    args = reacher.parse_args([*argv, "--basis-functions", "3"])
-    hook = reacher.schedule(args)
-    main = reacher.main_position_reward(agent.reward)
+    args = REACHER.parse([*argv, "--basis-functions", "3"])
+    hook = reacher_agent.schedule(args)
+    main = reacher_agent.main_position_reward(agent.reward)
     fine = agent.reward.base_rewards[0].base_rewards[1]
     far = np.concatenate([[1.2 + 0.5, 0.38, 0.38], np.zeros(7)])[None, :]
 
@@ -143,78 +146,76 @@ def test_the_schedule_widens_the_main_cost_and_start_variance_early_only():
     off = ["--early-start-var", "0"]
     plain = tiny_agent(off)
     before = plain.reward.base_rewards[0].base_rewards[0].W.numpy().copy(), plain.S_init
-    reacher.schedule(reacher.parse_args(off))(plain, 2)
-    np.testing.assert_array_equal(reacher.main_position_reward(plain.reward).W.numpy(),
+    reacher_agent.schedule(REACHER.parse(off))(plain, 2)
+    np.testing.assert_array_equal(reacher_agent.main_position_reward(plain.reward).W.numpy(),
                                   before[0])
     np.testing.assert_array_equal(plain.S_init, before[1])
 
 
 def test_the_reacher_arms_widen_their_first_learned_start_by_default():
-    from pilco.tasks import adaptation
-
-    healthy = reacher.parse_args([])
+    healthy = REACHER.parse([])
     assert (healthy.early_start_var, healthy.early_cost_width, healthy.early_episodes) == (
         0.1, 0.0, 1)
     assert healthy.policy_init_var == 0.1
     # the damaged arm (the elbow stuck in the healthy start pose) has the healthy defaults
-    damaged = reacher.parse_args([], damaged=True)
-    for key, value in vars(healthy).items():
+    damaged = DAMAGED_REACHER.parse([])
+    damaged_values = settings_to_dict(damaged)
+    for key, value in settings_to_dict(healthy).items():
         if key != "output":
-            assert getattr(damaged, key) == value, key
+            assert damaged_values[key] == value, key
     assert damaged.damage_mode == "stuck"
-    for other in (adaptation.parse_args([]), reacher.parse_args(["--preset", "paper-code"]),
-                  reacher.parse_args(["--preset", "paper-code"], damaged=True)):
+    for other in (ADAPTATION.parse([]), REACHER.parse(["--preset", "paper-code"]),
+                  DAMAGED_REACHER.parse(["--preset", "paper-code"])):
         assert (other.early_start_var, other.policy_init_var) == (0.0, 0.0)
     agent = tiny_agent([])
-    hook = reacher.schedule(healthy)
+    hook = reacher_agent.schedule(healthy)
     hook(agent, 2)
     np.testing.assert_allclose(agent.S_init, 0.1 * np.eye(10))
     hook(agent, 3)
     np.testing.assert_allclose(agent.S_init, 1e-4 * np.eye(10))
 
 
-def test_a_run_saved_before_a_setting_existed_resumes_without_it(tmp_path):
+def test_a_saved_run_resumes_with_its_settings_and_todays_defaults_for_missing_ones(
+        tmp_path):
     import json
 
-    from pilco.tasks import adaptation
-
-    new = vars(reacher.parse_args(["--output", str(tmp_path / "new")]))
+    new = settings_to_dict(REACHER.parse(["--output", str(tmp_path / "new"),
+                                          "--cost-width", "0.3", "--seed", "4"]))
     old = {k: v for k, v in new.items()
            if k not in ("early_start_var", "limit_cost", "fine_cost_width", "policy_init_var")}
     run = tmp_path / "old"
     run.mkdir()
-    (run / "progress.json").write_text(json.dumps({"args": old}))
-    resumed = reacher.parse_args(["--resume", str(run)])
+    (run / "progress.json").write_text(json.dumps({"settings": old}))
+    resumed = REACHER.parse(["--resume", str(run)])
     assert (resumed.early_start_var, resumed.limit_cost, resumed.fine_cost_width,
-            resumed.policy_init_var) == (0.0, 0.0, 0.0, 0.0)
-    assert resumed.cost_width == new["cost_width"] and resumed.seed == new["seed"]
-    assert adaptation.parse_args(["--resume", str(run)]).early_start_var == 0.0
+            resumed.policy_init_var) == (0.1, 0.1, 0.05, 0.1)
+    assert (resumed.cost_width, resumed.seed) == (0.3, 4)
+    assert ADAPTATION.parse(["--resume", str(run)]).early_start_var == 0.0
     # a saved value wins, and so does a flag given again
-    (run / "progress.json").write_text(json.dumps({"args": new}))
-    assert reacher.parse_args(["--resume", str(run)]).early_start_var == 0.1
-    assert reacher.parse_args(["--resume", str(run), "--early-start-var", "0.2"]
+    (run / "progress.json").write_text(json.dumps({"settings": dict(new,
+                                                                    early_start_var=0.05)}))
+    assert REACHER.parse(["--resume", str(run)]).early_start_var == 0.05
+    assert REACHER.parse(["--resume", str(run), "--early-start-var", "0.2"]
                               ).early_start_var == 0.2
 
 
 def test_the_adaptation_has_the_fine_cost_and_no_limit_bumps(tmp_path):
     import json
 
-    from pilco.tasks import adaptation
-
-    args = adaptation.parse_args(["--output", str(tmp_path / "new")])
+    args = ADAPTATION.parse(["--output", str(tmp_path / "new")])
     assert args.fine_cost_width == 0.05 and args.limit_cost == 0.0
-    agent = reacher.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
+    agent = reacher_agent.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
         (np.zeros((3, 17)), np.zeros((3, 10))), np.zeros((1, 10)))
     terms = agent.reward.base_rewards
     assert [type(t).__name__ for t in terms] == ["ExponentialReward"] * 2
-    np.testing.assert_allclose(terms[1].W.numpy(), reacher.position_weights(10, 0.05))
-    assert adaptation.parse_args(["--limit-cost", "0.1"]).limit_cost == 0.1
+    np.testing.assert_allclose(terms[1].W.numpy(), reacher_agent.position_weights(10, 0.05))
+    assert ADAPTATION.parse(["--limit-cost", "0.1"]).limit_cost == 0.1
     # a run saved while the adaptation had no fine cost (null) resumes without it
     run = tmp_path / "old"
     run.mkdir()
-    (run / "progress.json").write_text(json.dumps({"args": dict(vars(args),
-                                                                fine_cost_width=None)}))
-    assert adaptation.parse_args(["--resume", str(run)]).fine_cost_width is None
+    (run / "progress.json").write_text(json.dumps({"settings": dict(settings_to_dict(args),
+                                                                    fine_cost_width=None)}))
+    assert ADAPTATION.parse(["--resume", str(run)]).fine_cost_width is None
 
 
 class _HealthyRun:
@@ -250,25 +251,25 @@ def test_the_adaptation_damages_the_arm_after_its_healthy_episodes(flags, reachi
     from pilco.tasks import adaptation
 
     run = _HealthyRun(reaching, done)
-    adaptation.run_healthy(run, adaptation.parse_args(flags))
+    adaptation.run_healthy(run, ADAPTATION.parse(flags))
     assert len(run.records) - 1 == learned
 
 
 def test_the_damage_flag_gets_a_learnable_lengthscale_once_damaged_data_arrive():
-    from pilco.tasks import adaptation
+    from pilco.tasks import adaptation_model
 
     rng = np.random.default_rng(0)
     X, Y = rng.normal(size=(12, 18)), 0.01 * rng.normal(size=(12, 11))
     X[:, 10] = 0.0  # the flag: healthy transitions only
-    args = reacher.parse_args(["--basis-functions", "3"])
-    agent = reacher.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
+    args = REACHER.parse(["--basis-functions", "3"])
+    agent = reacher_agent.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
         (X, Y), np.append(X[0, :10], 0.0)[None, :])
 
     def flag_lengthscales():
         return np.array([m.kernel.lengthscales.numpy()[10] for m in agent.mgpr.models])
 
     np.testing.assert_allclose(flag_lengthscales(), 100.0, rtol=1e-12)  # constant: ignored
-    adaptation.learn_the_flag(agent)
+    adaptation_model.learn_the_flag(agent)
     agent.set_data((X, Y))
     np.testing.assert_allclose(flag_lengthscales(), 100.0, rtol=1e-12)
     damaged = X.copy()
@@ -290,9 +291,9 @@ def test_the_adaptation_can_keep_only_the_main_cost_after_the_damage(which):
     from pilco.tasks import adaptation
 
     healthy = ["--fine-cost-width", "0.05", "--limit-cost", "0.1"]
-    args = adaptation.parse_args([*healthy, "--damaged-cost", which])
+    args = ADAPTATION.parse([*healthy, "--damaged-cost", which])
     agent = tiny_agent(healthy)
-    combined, main = agent.reward, reacher.main_position_reward(agent.reward)
+    combined, main = agent.reward, reacher_agent.main_position_reward(agent.reward)
     before = agent.expected_return()
     exp = SimpleNamespace(agent=agent, episodes=[], episode_seed=lambda n: n,
                           make_env=lambda: make_env(FETCH_ID, reacher.env_kwargs(args, False)))
@@ -302,10 +303,10 @@ def test_the_adaptation_can_keep_only_the_main_cost_after_the_damage(which):
         assert agent.reward is combined
     else:
         assert agent.reward is main and type(main).__name__ == "ExponentialReward"
-        np.testing.assert_allclose(main.W.numpy(), reacher.position_weights(10, 0.2))
+        np.testing.assert_allclose(main.W.numpy(), reacher_agent.position_weights(10, 0.2))
         agent.m_init = np.concatenate([[1.0, 0.5, 0.6], np.zeros(7)])[None, :]
         assert abs(agent.expected_return() - before) > 1e-6  # the objective changed
-    assert adaptation.parse_args([]).damaged_cost == "all"
+    assert ADAPTATION.parse([]).damaged_cost == "all"
 
 
 @pytest.mark.parametrize("restarts", [1, 3])
@@ -317,8 +318,6 @@ def test_the_adaptation_restarts_its_policy_search_from_the_second_damaged_episo
     import argparse
 
     from test_hard_kill import AdaptationTask
-
-    from pilco.tasks import adaptation
 
     monkeypatch.setattr(os, "fsync", lambda fd: None)
     built = []
@@ -339,7 +338,7 @@ def test_the_adaptation_restarts_its_policy_search_from_the_second_damaged_episo
     if restarts > 1:
         assert (resumed.config.policy_restart_from, resumed.config.policy_restart_when) == (
             4, "always")
-    assert adaptation.parse_args([]).damaged_policy_restarts == 1  # off by default
+    assert ADAPTATION.parse([]).damaged_policy_restarts == 1  # off by default
 
 
 def priors_of(agent):
@@ -373,11 +372,11 @@ def test_a_resumed_paper_run_gets_its_priors_back(tmp_path):
             "--basis-functions", "2", "--policy-iters", "1", "--policy-iters-first", "1",
             "--model-iters", "2", "--quiet", "--no-render", "--no-figures",
             "--output", str(tmp_path)]
-    first = reacher.make_experiment(reacher.parse_args([*tiny, "--episodes", "2"]))
+    first = REACHER.experiment(REACHER.parse([*tiny, "--episodes", "2"]))
     first.run()
     assert priors_of(first.agent)[0] == ((1.0, 10.0), (1.5, 2.0))
-    resumed = reacher.make_experiment(
-        reacher.parse_args([*tiny, "--episodes", "3", "--resume", str(tmp_path)]))
+    resumed = REACHER.experiment(
+        REACHER.parse([*tiny, "--episodes", "3", "--resume", str(tmp_path)]))
     x = first.episodes[-1].states[-1]  # read from agent.npz, not rebuilt: the same policy
     np.testing.assert_allclose(resumed.agent.compute_action(x), first.agent.compute_action(x))
     assert priors_of(resumed.agent) == [((1.0, 10.0), (1.5, 2.0))] * 10
@@ -389,16 +388,14 @@ def test_a_resumed_damaged_run_keeps_its_damage_mode(mode, tmp_path):
     tiny = ["--horizon", "4", "--planning-horizon", "3", "--basis-functions", "2",
             "--policy-iters", "1", "--model-iters", "2", "--quiet", "--no-render",
             "--no-figures", "--output", str(tmp_path)]
-    first = reacher.make_experiment(
-        reacher.parse_args([*tiny, "--episodes", "2", "--damage-mode", mode], damaged=True),
-        "damaged_reacher", damaged=True)
+    first = DAMAGED_REACHER.experiment(
+        DAMAGED_REACHER.parse([*tiny, "--episodes", "2", "--damage-mode", mode]))
     first.run()
     elbow = first.episodes[-1].states[:, 3 + 3]
     np.testing.assert_allclose(elbow, 2.0 if mode == "stuck" else 0.0)
-    args = reacher.parse_args([*tiny, "--episodes", "3", "--resume", str(tmp_path)],
-                              damaged=True)
+    args = DAMAGED_REACHER.parse([*tiny, "--episodes", "3", "--resume", str(tmp_path)])
     assert args.damage_mode == mode
-    resumed = reacher.make_experiment(args, "damaged_reacher", damaged=True)
+    resumed = DAMAGED_REACHER.experiment(args)
     assert resumed.make_env().unwrapped.damage_mode == mode
     resumed.run()
     assert len(resumed.episodes) == 3
@@ -408,10 +405,10 @@ def test_a_resumed_damaged_run_keeps_its_damage_mode(mode, tmp_path):
 def test_a_run_saved_with_the_straight_arms_earlier_name_resumes(tmp_path):
     import json
 
-    saved = vars(reacher.parse_args(["--output", str(tmp_path)], damaged=True))
+    saved = settings_to_dict(DAMAGED_REACHER.parse(["--output", str(tmp_path)]))
     saved["damage_mode"] = "zero"  # the straightened arm's earlier name
-    (tmp_path / "progress.json").write_text(json.dumps({"args": saved}))
-    args = reacher.parse_args(["--resume", str(tmp_path)], damaged=True)
+    (tmp_path / "progress.json").write_text(json.dumps({"settings": saved}))
+    args = DAMAGED_REACHER.parse(["--resume", str(tmp_path)])
     kw = reacher.env_kwargs(args, damaged=True)
     from pilco.envs import FetchJointReacher
 
@@ -423,7 +420,7 @@ def test_a_drawn_target_comes_from_the_seed_and_stays_in_its_cube():
     from pilco.envs.fetch_reacher import DEFAULT_TARGET
 
     def target(*flags):
-        return reacher.env_kwargs(reacher.parse_args(list(flags)), False).get("target")
+        return reacher.env_kwargs(REACHER.parse(list(flags)), False).get("target")
 
     assert target() is None and target("--seed", "3") is None  # the env's default
     assert target("--target", "1.0", "0.5", "0.4") == (1.0, 0.5, 0.4)
@@ -438,14 +435,12 @@ def test_a_drawn_target_comes_from_the_seed_and_stays_in_its_cube():
     np.testing.assert_allclose(near - [1.0, 0.5, 0.4], (drawn[3] - DEFAULT_TARGET) / 3,
                                atol=1e-15)
     # the damaged arm and the adaptation read the same flag
-    from pilco.tasks import adaptation
-
-    damaged = reacher.parse_args(["--seed", "3", "--target-spread", "0.15"], damaged=True)
+    damaged = DAMAGED_REACHER.parse(["--seed", "3", "--target-spread", "0.15"])
     np.testing.assert_array_equal(reacher.env_kwargs(damaged, True)["target"], drawn[3])
-    adapting = adaptation.parse_args(["--seed", "3", "--target-spread", "0.15"])
+    adapting = ADAPTATION.parse(["--seed", "3", "--target-spread", "0.15"])
     np.testing.assert_array_equal(reacher.env_kwargs(adapting, False)["target"], drawn[3])
     with pytest.raises(SystemExit):
-        reacher.parse_args(["--target-spread", "-0.1"])
+        REACHER.parse(["--target-spread", "-0.1"])
 
 
 def test_a_drawn_target_out_of_reach_is_reported(caplog):

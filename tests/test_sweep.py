@@ -3,11 +3,13 @@ from __future__ import annotations
 
 import math
 import os
+import re
 
 import numpy as np
 import pytest
 
-from pilco.sweep import aggregate, cli, figures, runs
+from pilco.sweep import aggregate, cli, figures, flags, runs
+from pilco.tasks import TASKS, build_parser
 
 
 def summary(seed, solved_at=None, success=None, episodes=3, final=0.5, minimum=0.2,
@@ -164,56 +166,56 @@ def test_solved_by_episode_and_table():
 
 # --------------------------------------------------------------------------- arguments
 def test_parse_seeds():
-    assert cli.parse_seeds("0-3") == [0, 1, 2, 3]
-    assert cli.parse_seeds("5,0,3") == [0, 3, 5]
-    assert cli.parse_seeds("0-2,10,12-13,1") == [0, 1, 2, 10, 12, 13]
+    assert flags.parse_seeds("0-3") == [0, 1, 2, 3]
+    assert flags.parse_seeds("5,0,3") == [0, 3, 5]
+    assert flags.parse_seeds("0-2,10,12-13,1") == [0, 1, 2, 10, 12, 13]
     for bad in ("", "3-1", "a", "1-", "-1", "1,,2", "0-2-4"):
         with pytest.raises(ValueError):
-            cli.parse_seeds(bad)
+            flags.parse_seeds(bad)
 
 
 def test_assignments_and_flags():
-    assert cli.parse_assignment("horizon=30") == ("horizon", "30")
-    assert cli.parse_assignment("policy-iters=3") == ("policy_iters", "3")
-    assert cli.parse_assignment("cost_width=0.2,0.3", grid=True) == ("cost_width", ["0.2", "0.3"])
+    assert flags.parse_assignment("horizon=30") == ("horizon", "30")
+    assert flags.parse_assignment("policy-iters=3") == ("policy_iters", "3")
+    assert flags.parse_assignment("cost_width=0.2,0.3", grid=True) == ("cost_width", ["0.2", "0.3"])
     for bad in ("horizon", "=3", "horizon=", "1x=2", "seed=3", "output=x"):
         with pytest.raises(ValueError):
-            cli.parse_assignment(bad)
+            flags.parse_assignment(bad)
     with pytest.raises(ValueError, match="repeated"):
-        cli.parse_assignment("horizon=3,3", grid=True)
-    parser = cli.task_parser("cartpole")
+        flags.parse_assignment("horizon=3,3", grid=True)
+    parser = build_parser("cartpole")
     assert parser is not None
-    assert cli.setting_flags("horizon", "30", parser) == ["--horizon", "30"]
-    assert cli.setting_flags("retrain_unchanged_model", "true", parser) == \
+    assert flags.setting_flags("horizon", "30", parser) == ["--horizon", "30"]
+    assert flags.setting_flags("retrain_unchanged_model", "true", parser) == \
         ["--retrain-unchanged-model"]
-    assert cli.setting_flags("retrain_unchanged_model", "false", parser) == []
+    assert flags.setting_flags("retrain_unchanged_model", "false", parser) == []
     with pytest.raises(ValueError, match="takes no value"):
-        cli.setting_flags("retrain_unchanged_model", "3", parser)
+        flags.setting_flags("retrain_unchanged_model", "3", parser)
     with pytest.raises(ValueError, match="no flag --bogus"):
-        cli.setting_flags("bogus", "1", parser)
+        flags.setting_flags("bogus", "1", parser)
     # a flag that is on by default (--key/--no-key): false turns it off
-    adaptation = cli.task_parser("adaptation")
-    assert cli.setting_flags("stop_stuck_joints", "false", adaptation) == \
+    adaptation = build_parser("adaptation")
+    assert flags.setting_flags("stop_stuck_joints", "false", adaptation) == \
         ["--no-stop-stuck-joints"]
-    assert cli.setting_flags("stop_stuck_joints", "true", adaptation) == \
+    assert flags.setting_flags("stop_stuck_joints", "true", adaptation) == \
         ["--stop-stuck-joints"]
-    cli.check_task_flags(adaptation, ["--no-stop-stuck-joints"])
+    flags.check_task_flags(adaptation, ["--no-stop-stuck-joints"])
     # without the task's parser: true/false are flags without value
-    assert cli.setting_flags("no_early_stop", "true", None) == ["--no-early-stop"]
-    assert cli.setting_flags("horizon", "30", None) == ["--horizon", "30"]
+    assert flags.setting_flags("no_early_stop", "true", None) == ["--no-early-stop"]
+    assert flags.setting_flags("horizon", "30", None) == ["--horizon", "30"]
 
 
 def test_grid_settings_and_labels():
-    parser = cli.task_parser("cartpole")
-    combos = cli.settings([("horizon", "30")], [("max_force", ["5", "10"]),
+    parser = build_parser("cartpole")
+    combos = flags.settings([("horizon", "30")], [("max_force", ["5", "10"]),
                                                 ("squash", ["sat", "sin"])], parser)
     assert [label for label, _ in combos] == [
         "horizon=30,max_force=5,squash=sat", "horizon=30,max_force=5,squash=sin",
         "horizon=30,max_force=10,squash=sat", "horizon=30,max_force=10,squash=sin"]
     assert combos[1][1] == ["--horizon", "30", "--max-force", "5", "--squash", "sin"]
-    assert cli.settings([], [], parser) == [("default", [])]
+    assert flags.settings([], [], parser) == [("default", [])]
     with pytest.raises(ValueError, match="more than once"):
-        cli.settings([("horizon", "3")], [("horizon", ["4", "5"])], parser)
+        flags.settings([("horizon", "3")], [("horizon", ["4", "5"])], parser)
 
 
 def test_plan_builds_run_directories(tmp_path):
@@ -230,11 +232,18 @@ def test_plan_builds_run_directories(tmp_path):
     assert described[1] == {"label": "horizon=5", "flags": ["--horizon", "5", "--episodes", "2"]}
 
 
+def test_the_sweep_takes_the_tasks_of_pilco_tasks():
+    """The sweep's help names every task of :data:`pilco.tasks.TASKS`; a task's parser
+    comes from :func:`pilco.tasks.build_parser`, which names the tasks for an unknown one."""
+    help_text = " ".join(cli.build_parser().format_help().split())
+    assert f"one of: {', '.join(TASKS)}" in help_text
+    with pytest.raises(ValueError, match=re.escape(f"unknown task 'nope'; choose one of "
+                                                   f"{', '.join(TASKS)}")):
+        build_parser("nope")
+
+
 def test_pendulum_is_a_sweep_task(tmp_path):
-    """The task list, the help and the flag checks know the pendulum task."""
-    assert cli.task_names() == ("cartpole", "reacher", "damaged_reacher", "adaptation",
-                                "pendulum")
-    assert cli.task_names() == cli.DEFAULT_TASKS
+    """The help and the flag checks know the pendulum task."""
     assert "pendulum" in cli.build_parser().format_help()
     args = cli.build_parser().parse_args(["pendulum", "--seeds", "0-1", "--output",
                                           str(tmp_path), "--set", "threshold=0.2"])
@@ -257,6 +266,7 @@ def test_pendulum_is_a_sweep_task(tmp_path):
     (["cartpole", "--", "--seed", "3"], "set by the sweep"),
     (["cartpole", "--", "--not-a-flag"], "unrecognized arguments"),
     (["cartpole", "--max-retries", "-1"], "max-retries"),
+    (["cartpole", "--log-level", "loud"], "--log-level: invalid log_level value: 'loud'"),
 ])
 def test_bad_arguments_fail_before_ray(argv, message, monkeypatch, capsys, tmp_path):
     def no_ray(*_):
@@ -297,16 +307,6 @@ def test_resume_refuses_a_directory_of_other_flags(tmp_path):
     write_json_atomic(str(tmp_path / runs.SUMMARY), summary(1))
     with pytest.raises(ValueError, match="seed 1"):
         runs.finished_summary(spec)
-
-
-def test_thread_environment():
-    env = runs.thread_environment(3, {"PATH": "/bin", "OMP_NUM_THREADS": "8"})
-    assert env["PATH"] == "/bin"
-    for name in runs.THREAD_VARIABLES:  # TensorFlow's ops one thread each, 3 side by side
-        assert env[name] == ("1" if name == "TF_NUM_INTRAOP_THREADS" else "3")
-    for bad in (0, 1.5, True):
-        with pytest.raises(ValueError, match="threads"):
-            runs.thread_environment(bad)
 
 
 # ----------------------------------------------------------------------------- figures

@@ -30,7 +30,7 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from pilco.sweep import cli, runs  # noqa: E402 - after the skip
+from pilco.sweep import cli, preflight, runs  # noqa: E402 - after the skip
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -171,7 +171,7 @@ def refused_within_seconds(out, address, capsys) -> str:
     with pytest.raises(SystemExit) as stop:
         cli.main(["cartpole", "--seeds", "0", "--output", str(out), "--no-progress",
                   "--address", address, "--", *SHORT])
-    assert time.monotonic() - t0 < cli.CONNECT_TIMEOUT + 5
+    assert time.monotonic() - t0 < preflight.CONNECT_TIMEOUT + 5
     assert stop.value.code == 2
     return capsys.readouterr().err
 
@@ -182,7 +182,7 @@ def test_an_unreachable_address_fails_within_seconds(tmp_path, capsys):
     assert f"no Ray cluster answers at 127.0.0.1:{port}" in err
     assert "leave out --address" in err
     # nothing was started: no run directory, no report, only the released lock
-    assert os.listdir(tmp_path) == [cli.LOCK_FILE]
+    assert os.listdir(tmp_path) == [preflight.LOCK_FILE]
 
 
 def test_auto_with_a_stopped_heads_record_fails_within_seconds(tmp_path, monkeypatch, capsys):
@@ -198,7 +198,7 @@ def test_auto_with_a_stopped_heads_record_fails_within_seconds(tmp_path, monkeyp
     err = refused_within_seconds(out, "auto", capsys)
     assert f"127.0.0.1:{port} (recorded in {record})" in err
     assert "ray start --head" in err
-    assert os.listdir(out) == [cli.LOCK_FILE]
+    assert os.listdir(out) == [preflight.LOCK_FILE]
     assert record.read_text() == f"127.0.0.1:{port}"  # Ray's file is not the sweep's
 
 
@@ -220,16 +220,18 @@ def test_auto_without_any_cluster_fails_clearly(tmp_path):
     assert done.returncode == 2, done.stderr[-2000:]
     assert "--address auto: Ray could not connect" in done.stderr
     assert "Could not find any running Ray instance" in done.stderr
-    assert os.listdir(out) == [cli.LOCK_FILE]
+    assert os.listdir(out) == [preflight.LOCK_FILE]
 
 
 def test_address_forms_are_checked_before_anything_starts(tmp_path, capsys):
-    assert cli.split_address("10.0.0.5:6379") == ("10.0.0.5", 6379)
-    assert cli.split_address("ray://head.example") == ("head.example", cli.RAY_CLIENT_PORT)
-    assert cli.split_address("auto") is None and cli.split_address("local") is None
+    assert preflight.split_address("10.0.0.5:6379") == ("10.0.0.5", 6379)
+    assert preflight.split_address("ray://head.example") == \
+        ("head.example", preflight.RAY_CLIENT_PORT)
+    assert preflight.split_address("auto") is None
+    assert preflight.split_address("local") is None
     for bad in ("head", "head:", "ray://", "a b:1", "head:70000"):
         with pytest.raises(ValueError, match="--address"):
-            cli.split_address(bad)
+            preflight.split_address(bad)
     with pytest.raises(SystemExit) as stop:
         cli.main(["cartpole", "--output", str(tmp_path / "out"), "--address", "head"])
     assert stop.value.code == 2
@@ -255,7 +257,8 @@ def test_a_second_sweep_refuses_a_locked_directory_and_a_killed_holder_frees_it(
     out = tmp_path / "out"
     finished_by_hand(str(out / "default" / "seed-0"), 0)
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time; from pilco.sweep.cli import lock_output; "
+        [sys.executable, "-c", "import sys, time; "
+                               "from pilco.sweep.preflight import lock_output; "
                                "held = lock_output(sys.argv[1]); print('locked', flush=True); "
                                "time.sleep(600)", str(out)],
         cwd=ROOT, env=environment(str(tmp_path / "ray")), stdout=subprocess.PIPE, text=True)
@@ -276,7 +279,7 @@ def test_a_second_sweep_refuses_a_locked_directory_and_a_killed_holder_frees_it(
     assert cli.main(command) == 0
     report = load(out / "sweep.json")
     assert [r["status"] for r in report["runs"]] == ["skipped"]
-    assert (out / cli.LOCK_FILE).read_text().startswith(f"pid {os.getpid()} on ")
+    assert (out / preflight.LOCK_FILE).read_text().startswith(f"pid {os.getpid()} on ")
 
 
 # --------------------------------------------------------------------- foreign clusters
@@ -425,11 +428,13 @@ def test_a_corrupt_summary_is_run_again_not_counted(faulty_sweep, tmp_path):
 # ------------------------------------------------------------- the driver interrupted
 def interrupted(out):
     """A sweep of two settings: 5-step episodes (a quick run) and 1000-step ones (about
-    three seconds an episode)."""
+    three seconds an episode; :data:`EPISODES` of them leave the driver time to be
+    signalled while the slow run is under way, also on a busy machine)."""
     return ["cartpole", "--seeds", "0", "--grid", "horizon=5,1000", "--output", str(out),
-            "--no-progress", "--no-figures", "--max-retries", "0", "--", "--episodes", "3",
-            "--random-episodes", "3"]
+            "--no-progress", "--no-figures", "--max-retries", "0", "--", "--episodes",
+            str(EPISODES), "--random-episodes", str(EPISODES)]
 QUICK, SLOW = "horizon=5", "horizon=1000"
+EPISODES = 5
 
 
 def driver_logs(ray_folder, pid):
@@ -553,10 +558,10 @@ def test_an_interrupted_driver_stops_its_runs_and_keeps_what_finished(interrupte
                                                                      (SLOW, "not_run")]
     assert report["results"][QUICK]["finished"] == 1
     assert report["results"][SLOW]["not_run"] == 1
-    check_run_files(s["quick"], 3)
+    check_run_files(s["quick"], EPISODES)
     assert s["slow_record"]["status"] == "interrupted"
     # the stopped run saved its episodes so far and ended before its last one
-    assert 1 <= len(s["saved"]) <= len(s["slow_episodes"]) < 3
+    assert 1 <= len(s["saved"]) <= len(s["slow_episodes"]) < EPISODES
     assert s["slow_episodes"][:len(s["saved"])] == s["saved"]
     assert s["slow_summary"] is None or s["slow_summary"]["complete"] is False
 
@@ -572,7 +577,7 @@ def test_the_rerun_skips_finished_runs_and_resumes_the_interrupted_one(interrupt
         s["quick_summary_mtime"]
     kept = s["slow_episodes"]
     assert attempts(s["slow"]) == [f"resume after episode {len(kept)}"]
-    check_run_files(s["slow"], 3, kept=kept)
+    check_run_files(s["slow"], EPISODES, kept=kept)
     assert load(os.path.join(s["slow"], runs.RUN_RECORD))["status"] == "finished"
     assert {label: r["finished"] for label, r in report["results"].items()} == {
         QUICK: 1, SLOW: 1}

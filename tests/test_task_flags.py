@@ -1,21 +1,19 @@
 """Every task refuses a bad numeric flag by name, as an argparse error (exit status 2),
 before any environment, model or TensorFlow work starts; a resumed run keeps the settings
-it was saved with."""
+it was saved with, and a setting it lacks takes today's default."""
 import json
 
 import pytest
 
-from pilco.tasks import adaptation, cartpole, pendulum, reacher
+from pilco.tasks import TASKS, get_task
+from pilco.tasks.adaptation import ADAPTATION
+from pilco.tasks.cartpole import CARTPOLE
+from pilco.tasks.reacher import DAMAGED_REACHER, REACHER
+from pilco.tasks.settings import settings_to_dict
 
-PARSERS = {
-    "cartpole": cartpole.parse_args,
-    "pendulum": pendulum.parse_args,
-    "reacher": reacher.parse_args,
-    "damaged_reacher": lambda argv: reacher.parse_args(argv, damaged=True),
-    "adaptation": adaptation.parse_args,
-}
+PARSERS = {name: get_task(name).parse for name in TASKS}
 
-# flags every task has (experiment/cli.py's add_common_arguments)
+# flags every task has (pilco.tasks.settings.RunSettings)
 COMMON = [
     (["--seed", "-1"], "--seed: must be at least 0"),
     (["--episodes", "0"], "--episodes: must be at least 1"),
@@ -73,38 +71,39 @@ def test_edge_values_are_accepted(task, tmp_path):
     assert (args.max_data, args.random_episodes, args.policy_iters_first) == (0, 0, 1)
 
 
-def test_cartpole_restarts_late_by_default_and_old_runs_resume_as_they_started(tmp_path):
-    args = cartpole.parse_args(["--output", str(tmp_path / "new")])
-    config = cartpole.make_config(args)
+def test_cartpole_restarts_late_by_default_and_saved_runs_resume_with_their_settings(
+        tmp_path):
+    args = CARTPOLE.parse(["--output", str(tmp_path / "new")])
+    config = CARTPOLE.config(args)
     # no restarts before episode 5, two runs per search from there while unsolved
     assert [config.policy_restarts_at(n, False) for n in (2, 4, 5, 8)] == [1, 1, 2, 2]
     assert config.policy_restarts_at(6, True) == 1
-    # a run saved with restarts before --policy-restart-from existed restarted from its
-    # first learned episode; resumed, it still does
+    # a saved run's settings win over the defaults; one it lacks takes today's default
     saved = tmp_path / "saved"
     saved.mkdir()
-    old = {k: v for k, v in vars(args).items() if k != "policy_restart_from"}
+    old = {k: v for k, v in settings_to_dict(args).items() if k != "policy_restart_from"}
     old.update(policy_restarts=3, output=str(saved))
-    (saved / "progress.json").write_text(json.dumps({"args": old}))
-    resumed = cartpole.make_config(cartpole.parse_args(["--resume", str(saved)]))
-    assert (resumed.policy_restarts, resumed.policy_restart_from) == (3, 1)
-    assert resumed.policy_restarts_at(2, False) == 3
+    (saved / "progress.json").write_text(json.dumps({"settings": old}))
+    resumed = CARTPOLE.config(CARTPOLE.parse(["--resume", str(saved)]))
+    assert (resumed.policy_restarts, resumed.policy_restart_from) == (3, 5)
+    assert resumed.policy_restarts_at(2, False) == 1
+    assert resumed.policy_restarts_at(5, False) == 3
 
 
-def test_the_adaptation_down_weights_old_data_and_old_runs_resume_as_they_started(tmp_path):
-    from pilco.tasks import adaptation
-
-    args = adaptation.parse_args(["--output", str(tmp_path / "new")])
+def test_the_adaptation_down_weights_old_data_and_older_files_resume(tmp_path):
+    args = ADAPTATION.parse(["--output", str(tmp_path / "new")])
     assert args.old_data_noise == 100.0
-    assert adaptation.parse_args(["--old-data-noise", "1"]).old_data_noise == 1.0
-    # a run saved before the flag existed weighed the healthy data as equals; resumed, it
-    # still does
+    assert ADAPTATION.parse(["--old-data-noise", "1"]).old_data_noise == 1.0
+    # a progress.json of an older version holds the settings under "args", and may lack
+    # settings added since (they take today's defaults) or hold removed ones (ignored)
     saved = tmp_path / "saved"
     saved.mkdir()
-    old = {k: v for k, v in vars(args).items() if k != "old_data_noise"}
-    old.update(output=str(saved))
+    old = {k: v for k, v in settings_to_dict(args).items() if k != "old_data_noise"}
+    old.update(output=str(saved), healthy_episodes=2, removed_long_ago=True)
     (saved / "progress.json").write_text(json.dumps({"args": old}))
-    assert adaptation.parse_args(["--resume", str(saved)]).old_data_noise == 1.0
+    resumed = ADAPTATION.parse(["--resume", str(saved)])
+    assert (resumed.old_data_noise, resumed.healthy_episodes) == (100.0, 2)
+    assert resumed.episodes == 1 + 2 + 4
 
 
 def test_the_reacher_arms_stop_a_stalled_policy_search_and_the_others_do_not(tmp_path):
@@ -114,16 +113,15 @@ def test_the_reacher_arms_stop_a_stalled_policy_search_and_the_others_do_not(tmp
     out = ["--output", str(tmp_path / "run")]
 
     def early_stop(args, damaged=False):
-        config = reacher.make_config(args, "damaged_reacher" if damaged else "reacher",
-                                     damaged)
+        config = (DAMAGED_REACHER if damaged else REACHER).config(args)
         return config.policy_early_stop_at(False), config.policy_patience
 
-    assert early_stop(reacher.parse_args(out)) == (0.01, 5)
-    assert early_stop(reacher.parse_args(out, damaged=True), damaged=True) == (0.01, 5)
-    assert early_stop(reacher.parse_args(["--preset", "paper-code", *out], damaged=True),
+    assert early_stop(REACHER.parse(out)) == (0.01, 5)
+    assert early_stop(DAMAGED_REACHER.parse(out), damaged=True) == (0.01, 5)
+    assert early_stop(DAMAGED_REACHER.parse(["--preset", "paper-code", *out]),
                       damaged=True)[0] == 0.0
     # 0: a run never gains less than 0, so every iteration runs
-    assert early_stop(reacher.parse_args(["--preset", "paper-code", *out]))[0] == 0.0
-    assert early_stop(reacher.parse_args(["--policy-min-rel-improvement", "0", *out]))[0] == 0.0
-    adapted = adaptation.parse_args(out)
+    assert early_stop(REACHER.parse(["--preset", "paper-code", *out]))[0] == 0.0
+    assert early_stop(REACHER.parse(["--policy-min-rel-improvement", "0", *out]))[0] == 0.0
+    adapted = ADAPTATION.parse(out)
     assert (adapted.policy_min_rel_improvement, adapted.policy_patience) == (None, 10)

@@ -30,6 +30,7 @@ import logging
 import gymnasium
 
 from pilco.envs.cartpole import CartPoleSwingUp
+from pilco.envs.fetch_context import TargetInState
 from pilco.envs.fetch_damage import DamageFlag
 from pilco.envs.fetch_reach_bound import ReachBound, fewest_steps
 from pilco.envs.fetch_reacher import ARM_JOINTS, FetchJointReacher
@@ -48,6 +49,7 @@ __all__ = [
     "PENDULUM_ID",
     "PendulumSwingUp",
     "ReachBound",
+    "TargetInState",
     "fewest_steps",
     "register_envs",
 ]

@@ -3,6 +3,10 @@
 Each check raises a ``TypeError`` (wrong kind of value) or ``ValueError`` (wrong shape,
 range, NaN/inf, unknown name) whose message starts with the argument's name, and returns
 the value in the form the environments store (float64 arrays, Python numbers).
+
+These checks are the environments' own, not :mod:`pilco.validation`'s: :mod:`pilco.envs`
+imports nothing from the rest of pilco (the split of argument checks by layer is
+described in :mod:`pilco.validation`).
 """
 from __future__ import annotations
 

@@ -12,14 +12,10 @@ module             job
 ``store``          :class:`RunStore`, the files of a run directory
 ``signals``        SIGTERM as a stop at the next safe point
 ``progress``       progress bars and the optimisers' callback
-``report``         the timing and episode tables, the diagnosis report
-``cli``            shared flags, ``--resume``, logging, the end of every ``main``
-``diagnose``       why a learned episode failed: model, optimiser or objective
-``diagnostics``    the measurements of ``diagnose``
-``reconstruct``    the agent as it was when an episode ran (saved or replayed)
+``report``         the timing and episode tables
 =================  ==============================================================
 
-This package logs through :mod:`logging`; only ``cli.finish`` prints (for the scripts).
+This package logs through :mod:`logging`; nothing here prints (the tasks print their tables).
 """
 from .config import ExperimentConfig
 from .episode import Episode, make_env, rollout, stack_transitions

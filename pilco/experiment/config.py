@@ -96,6 +96,9 @@ class ExperimentConfig:
     quiet: bool = False
 
     def __post_init__(self):
+        """Check each setting and the relations between them (a ``ValueError`` naming the
+        setting). Every way a run is configured builds this dataclass, so these checks
+        cover command-line flags and the settings a resumed run reads back alike."""
         for name in ("episodes", "steps", "model_iters", "policy_iters", "model_restarts",
                      "policy_restarts", "policy_patience", "hold_steps",
                      "policy_restart_from"):

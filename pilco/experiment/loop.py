@@ -51,7 +51,7 @@ class Experiment(RunRecord):
             ``config.env_id`` and ``config.env_kwargs``.
         distance_fn: ``(env, info) -> float``; default ``info["distance"]`` or
             ``info["tip_distance"]``.
-        args: the command-line settings, stored for ``--resume``.
+        settings: the task's settings as a JSON-ready dict, stored for ``--resume``.
         render_fn: ``Episode -> frames`` drawing the final episode after it ran (e.g. a
             replay in another process); the env then never renders during rollouts.
         after_model_fit: ``agent -> None`` called after every ``optimize_models``.
@@ -59,13 +59,18 @@ class Experiment(RunRecord):
             ``optimize_policy`` (e.g. a reward that changes with the episode).
         success_fn: ``summary -> bool``, the task's success rule written to the summary
             as ``"success"`` (default: ``summary["solved"]``).
+        model_data: the task's choice of the model's transitions and their noise factors
+            (:attr:`~pilco.experiment.record.RunRecord.model_data`; default every
+            episode's, factors 1), also for the agent of a resumed run.
+        reset_options: ``episode number -> options of env.reset`` (e.g. the target of a
+            multi-task run's episode); default none.
 
     The collected episodes, records, timings, task state, saving and the summary are
     those of :class:`~pilco.experiment.record.RunRecord`.
 
     ``before_replayed_episode``: ``(view, episode number) -> None`` or None; when the
-    run's learning is replayed (:func:`~pilco.experiment.reconstruct.replay_learning`,
-    e.g. by ``python -m pilco.diagnose``), called before each learned episode's model fit
+    run's learning is replayed (:func:`pilco.diagnose.replay.replay_learning`, e.g. by
+    ``python -m pilco.diagnose``), called before each learned episode's model fit
     with the replay's view, so that a task can redo what it changed in its agent during
     the run (the adaptation's damage).
     """
@@ -74,12 +79,17 @@ class Experiment(RunRecord):
                  build_agent: Callable[[Data, np.ndarray], Any],
                  make_env: Optional[Callable[[], Any]] = None,
                  distance_fn: Optional[Callable[[Any, dict], float]] = None,
-                 args: Optional[Dict[str, Any]] = None,
+                 settings: Optional[Dict[str, Any]] = None,
                  render_fn: Optional[Callable[[Episode], List[np.ndarray]]] = None,
                  after_model_fit: Optional[Callable[[Any], None]] = None,
                  before_policy_search: Optional[Callable[[Any, int], None]] = None,
-                 success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None):
-        super().__init__(config, directory, args, success_fn)
+                 success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None,
+                 model_data: Optional[Callable[[Any], Tuple[np.ndarray, np.ndarray,
+                                                            Optional[np.ndarray]]]] = None,
+                 reset_options: Optional[Callable[[int], Optional[dict]]] = None):
+        super().__init__(config, directory, settings, success_fn)
+        self.model_data = model_data
+        self.reset_options = reset_options
         self.build_agent = build_agent
         self.distance_fn = distance_fn or distance_from_info
         self.render_fn = render_fn
@@ -123,7 +133,9 @@ class Experiment(RunRecord):
         """Run episode ``number`` (random when ``policy_fn`` is None); the final episode is
         rendered. An interrupted rollout is kept as partial data and re-raised."""
         cfg, last = self.config, number == self.config.episodes
+        options = self.reset_options(number) if self.reset_options is not None else None
         ep = rollout(self.make_env(), policy_fn, cfg.steps, seed=self.episode_seed(number),
+                     reset_options=options,
                      random=policy_fn is None, random_action=random_action,
                      distance_fn=self.distance_fn,
                      render=cfg.render and last and self.render_fn is None, quiet=cfg.quiet,

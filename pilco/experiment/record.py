@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Callable, Dict, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -24,24 +24,19 @@ class RunRecord:
     """The episodes, records, predictions, timings and task state of one run, the agent
     they trained, and the run directory they are saved to (see :class:`Experiment`).
 
-    Task state that must survive a resume lives in typed attributes:
-    ``train_from_episode`` (1-based: the model learns from this episode on),
-    ``older_noise_scale`` and ``older_before_episode`` (the transitions of episodes before
-    ``older_before_episode`` have their noise variance multiplied by ``older_noise_scale``
-    in the model: a large factor down-weights them, e.g. the healthy arm's after a damage;
-    a list gives each state dimension's GP its own factor),
-    ``inert_actions`` and ``inert_from_episode`` (action dimensions that had no effect on
-    the system from that episode on, e.g. a stuck joint's command: the model sees them as
-    0 there, their effective value; the episodes keep what was sent)
-    and ``summary_fields`` (extra fields of the summary, e.g. when a damage happened).
+    What a task keeps across a resume lives in ``task_state`` (a JSON-ready dict, saved
+    in ``progress.json``) and ``summary_fields`` (extra fields of the summary, e.g. when a
+    damage happened). A task that chooses which transitions its model learns from, or
+    weighs them, sets ``model_data`` (see :meth:`training_data`).
     """
 
     def __init__(self, config: ExperimentConfig, directory: str,
-                 args: Optional[Dict[str, Any]] = None,
+                 settings: Optional[Dict[str, Any]] = None,
                  success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None):
         self.config = config
         self.store = RunStore(directory)
-        self.args = dict(args or {})
+        #: the task's settings (JSON-ready), saved for ``--resume``
+        self.settings = dict(settings or {})
         self.success_fn = success_fn
         self.agent = None
         self.episodes: List[Episode] = []
@@ -51,13 +46,13 @@ class RunRecord:
         self.seconds = {p: 0.0 for p in PHASES}
         self.cpu_seconds: Dict[int, Dict[str, float]] = {}
         self.wall_seconds = 0.0
-        self.train_from_episode = 1
-        #: float, or one float per state dimension (its output GP's factor)
-        self.older_noise_scale: Union[float, List[float]] = 1.0
-        self.older_before_episode = 1
-        #: action dimensions (0-based) the model sees as 0 from ``inert_from_episode`` on
-        self.inert_actions: List[int] = []
-        self.inert_from_episode = 1
+        #: what the task keeps across a resume (JSON-ready; saved in progress.json)
+        self.task_state: Dict[str, Any] = {}
+        #: ``record -> (X [N, D+U], Y [N, D], noise factors [N] or [D, N] or None)``: the
+        #: transitions the model learns from and their noise-variance factors, before the
+        #: ``max_data`` cap; None: every episode's transitions, all factors 1
+        self.model_data: Optional[Callable[["RunRecord"], Tuple[np.ndarray, np.ndarray,
+                                                               Optional[np.ndarray]]]] = None
         self.summary_fields: Dict[str, Any] = {}
         self.interrupted = False
         self.complete = False
@@ -79,42 +74,30 @@ class RunRecord:
         """Every collected transition: ``X [N, D+U]``, ``Y [N, D]``, episode order."""
         return stack_transitions(self.episodes)
 
-    def _training_episodes(self) -> List[Tuple[int, Episode]]:
-        """``(number, episode)`` of the episodes the model learns from: from
-        ``train_from_episode`` on, at least the last one (numbers 1-based)."""
-        first = min(self.train_from_episode, len(self.episodes))
-        return list(enumerate(self.episodes[first - 1:], start=first))
+    def _model_data(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:attr:`model_data`'s transitions and factors (default: every episode, factors 1),
+        the first ``max_data`` of them."""
+        if self.model_data is None:
+            X, Y = stack_transitions(self.episodes)
+            scales = None
+        else:
+            X, Y, scales = self.model_data(self)
+        scales = np.ones(len(X)) if scales is None else np.asarray(scales, dtype=float)
+        cap = self.config.max_data
+        if cap is not None:
+            X, Y, scales = X[:cap], Y[:cap], scales[..., :cap]
+        return X, Y, scales
 
     def training_data(self) -> Data:
-        """The model's transitions: episodes from ``train_from_episode`` on (at least the
-        last one), the first ``max_data`` of them; the ``inert_actions`` of episodes from
-        ``inert_from_episode`` on are 0 (what reached the system)."""
-        episodes = self._training_episodes()
-        X, Y = stack_transitions([e for _, e in episodes])
-        if self.inert_actions and len(X):
-            inert = np.concatenate([np.full(e.steps, number >= self.inert_from_episode)
-                                    for number, e in episodes])
-            columns = Y.shape[1] + np.asarray(self.inert_actions, dtype=int)
-            X[np.ix_(inert, columns)] = 0.0  # X is stack_transitions' own new array
-        if self.config.max_data is not None:
-            X, Y = X[: self.config.max_data], Y[: self.config.max_data]
+        """The model's transitions ``X [N, D+U]``, ``Y [N, D]``: those of
+        :attr:`model_data` (default: every episode's), the first ``max_data`` of them."""
+        X, Y, _ = self._model_data()
         return X, Y
 
     def training_noise_scales(self) -> np.ndarray:
         """Noise-variance factor of each transition of :meth:`training_data`, [N] (or
-        [D, N] when ``older_noise_scale`` is a list, one factor per output GP):
-        ``older_noise_scale`` for the episodes before ``older_before_episode``, else 1;
-        all ones while the data hold no transition of a later episode (older data are
-        down-weighted against newer ones only: scaling every noise variance alike would
-        only change the fit)."""
-        older = np.asarray(self.older_noise_scale, dtype=float)
-        old = np.concatenate([np.full(e.steps, number < self.older_before_episode)
-                              for number, e in self._training_episodes()])
-        if self.config.max_data is not None:
-            old = old[: self.config.max_data]
-        if np.all(old):
-            old = np.zeros_like(old)
-        return np.where(old, older[..., None] if older.ndim else older, 1.0)
+        [D, N], one row per output GP): :attr:`model_data`'s, default all 1."""
+        return self._model_data()[2]
 
     def give_agent_data(self, agent) -> None:
         """``agent.set_data`` with :meth:`training_data` and, when some differ from 1,

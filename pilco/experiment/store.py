@@ -153,7 +153,7 @@ def progress_record(exp) -> Dict[str, Any]:
     done = min(len(exp.episodes), exp.store.saved_episodes)
     return {
         "config": dataclasses.asdict(exp.config),
-        "args": exp.args,
+        "settings": exp.settings,
         "episodes_done": done,
         "records": exp.records[:done],
         "seconds": exp.seconds,
@@ -161,17 +161,19 @@ def progress_record(exp) -> Dict[str, Any]:
         # wall times measured on a busy machine
         "cpu_seconds": exp.cpu_seconds,
         "wall_seconds": exp.wall(),
-        "train_from_episode": exp.train_from_episode,
-        "older_noise_scale": exp.older_noise_scale,
-        "older_before_episode": exp.older_before_episode,
-        "inert_actions": list(exp.inert_actions),
-        "inert_from_episode": exp.inert_from_episode,
+        "task_state": exp.task_state,
         "summary_fields": exp.summary_fields,
         "interrupted": exp.interrupted,
         "complete": exp.complete,
         # False after a failed agent write: agent.npz (if any) is then older than the data
         "agent_saved": exp.store.agent_current and os.path.exists(exp.store.agent_path),
     }
+
+
+#: fields of progress.json that older versions wrote for the task state (now in
+#: ``task_state``), read into it on resume
+LEGACY_TASK_STATE = ("train_from_episode", "older_noise_scale", "older_before_episode",
+                     "inert_actions", "inert_from_episode")
 
 
 def restore_progress(exp, progress: Dict[str, Any]) -> None:
@@ -184,12 +186,11 @@ def restore_progress(exp, progress: Dict[str, Any]) -> None:
     exp.wall_seconds = float(progress.get("wall_seconds", 0.0))
     exp.cpu_seconds = {int(k): v for k, v in progress.get("cpu_seconds", {}).items()}
     legacy = progress.get("extra", {})
-    exp.train_from_episode = int(progress.get("train_from_episode",
-                                              legacy.get("train_from_episode", 1)))
-    older = progress.get("older_noise_scale", 1.0)
-    exp.older_noise_scale = ([float(f) for f in older] if isinstance(older, list)
-                             else float(older))
-    exp.older_before_episode = int(progress.get("older_before_episode", 1))
-    exp.inert_actions = [int(a) for a in progress.get("inert_actions", [])]
-    exp.inert_from_episode = int(progress.get("inert_from_episode", 1))
+    exp.task_state = dict(progress.get("task_state", {}))
+    # files of older versions kept the task state in fields of their own
+    for key in LEGACY_TASK_STATE:
+        if key in progress:
+            exp.task_state.setdefault(key, progress[key])
+    if "train_from_episode" in legacy:
+        exp.task_state.setdefault("train_from_episode", legacy["train_from_episode"])
     exp.summary_fields = dict(progress.get("summary_fields", legacy.get("summary", {})))

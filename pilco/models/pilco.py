@@ -4,7 +4,14 @@
 controller and a reward (any objects following :mod:`pilco.protocols`), the initial state
 distribution and the horizon. The compiled rollout is :class:`pilco.models.rollout.Rollout`,
 the optimiser loop :func:`pilco.models.policy_search.search_policy`, the file layout
-:mod:`pilco.models.storage`.
+:mod:`pilco.models.storage`, the index sets of the state (angles, context, what the
+dynamics model and the policy read) :class:`pilco.models.layout.StateLayout`.
+
+Multi-task PILCO (Deisenroth et al., ICRA 2014): declare the dimensions that hold the
+task (e.g. the target position) as ``context_indices`` (constant through an episode,
+read by the policy, not predicted) and give one start distribution per training task
+(``m_init [T, D]``, each row holding its task's context): the policy objective is the
+sum of the T tasks' expected returns.
 """
 from __future__ import annotations
 
@@ -21,9 +28,7 @@ from ..validation import (
     check_bool,
     check_columns,
     check_controller,
-    check_covariance,
     check_gaussian,
-    check_indices,
     check_min_rel_improvement,
     check_option,
     check_positive_int,
@@ -33,10 +38,12 @@ from ..validation import (
     check_transitions,
 )
 from . import storage
+from .layout import StateLayout
 from .mgpr import MGPR
 from .policy_search import GuardedScipy, search_policy
 from .rollout import Rollout
 from .smgpr import SMGPR
+from .starts import check_starts, check_task
 from .transitions import Transitions
 
 __all__ = ["PILCO", "POLICY_METHODS"]
@@ -53,13 +60,17 @@ class PILCO(gpflow.base.Module):
     Args:
         data: raw transitions ``(X [N, D + U] = [x_t, u_t], Y [N, D] = x_{t+1} - x_t)``.
         controller: a policy (:class:`pilco.protocols.Controller`) with
-            ``state_dim == D + len(angle_indices)`` (it reads the angle-augmented state)
-            and ``control_dim == U``.
+            ``state_dim == D + len(angle_indices)`` (it reads the angle-augmented state;
+            with ``policy_indices``: the features of those dimensions,
+            :attr:`policy_dim`) and ``control_dim == U``.
         reward: a reward (:class:`pilco.protocols.Reward`) on the raw state
-            (``state_dim == D``).
+            (``state_dim == D``, context dimensions included).
         horizon: number of predicted steps in the policy objective.
-        m_init: mean of the initial state [1, D] (default: the first state of ``data``).
-        S_init: covariance of the initial state [D, D] (default ``0.01 * I``).
+        m_init: mean of the initial state [1, D] (default: the first state of ``data``),
+            or T means [T, D], one start per task: the objective sums the T tasks'
+            expected returns.
+        S_init: covariance of the initial state [D, D] (default ``0.01 * I``), shared by
+            all tasks, or one per task [T, D, D].
         angle_indices: state dimensions that are angles; the GP and the policy read the
             state with each angle replaced by its (sin, cos) pair, appended in order after
             the non-angle dimensions. The GP still predicts differences of the raw state.
@@ -69,37 +80,68 @@ class PILCO(gpflow.base.Module):
             state distribution itself, which is what the MATLAB reference reproduces.
         model_options: keyword arguments of the dynamics model's constructor
             (``noise_floor``, ``max_snr``, ``max_lengthscale_ratio``).
+        context_indices: state dimensions that are constant through an episode (the
+            task, e.g. a target position; not angles). They are not predicted: a
+            predicted step keeps their mean and variance and carries their
+            cross-covariances; the dynamics GPs (one per other dimension) do not read
+            them unless ``dynamics_indices`` says so; the policy does.
+        dynamics_indices: state dimensions whose features the dynamics GPs read (MATLAB
+            ``dyni``; default: every non-context dimension).
+        policy_indices: state dimensions whose features the policy reads (MATLAB
+            ``poli``; default: all).
+
+    See :class:`pilco.models.layout.StateLayout` for the index sets. Bad indices or
+    starts raise ValueError naming the problem, before TensorFlow sees them.
     """
 
     def __init__(self, data, controller, reward, horizon: int = 30, m_init=None, S_init=None,
                  angle_indices: Sequence[int] = (), num_induced_points: Optional[int] = None,
                  policy_input_noise: bool = False, model_options: Optional[dict] = None,
-                 name: Optional[str] = None):
+                 name: Optional[str] = None, context_indices: Sequence[int] = (),
+                 dynamics_indices: Optional[Sequence[int]] = None,
+                 policy_indices: Optional[Sequence[int]] = None):
         super().__init__(name=name)
         X, Y = check_transitions(data, "data")
         self.state_dim = D = Y.shape[1]
         self.control_dim = U = X.shape[1] - D
-        self.angle_indices = check_indices(angle_indices, D, "angle_indices")
+        self.layout = StateLayout(D, angle_indices, context_indices, dynamics_indices,
+                                  policy_indices)
+        self.angle_indices = self.layout.angle_indices
         self.feature_dim = D + len(self.angle_indices)
-        check_controller(controller, self.feature_dim, U, D)
+        self._check_controller(controller)
         check_reward(reward, D)
         self.policy_input_noise = check_bool(policy_input_noise, "policy_input_noise")
         horizon = check_positive_int(horizon, "horizon")
         self.num_induced_points = num_induced_points
-        self._transitions = Transitions(X, Y, D, self.angle_indices)
-        gp_data = (self.gp_inputs(X), Y)
+        m0 = X[0:1, :D] if m_init is None else m_init
+        S0 = 0.01 * np.eye(D) if S_init is None else S_init
+        m0, S0, self._shared_S = check_starts(m0, S0, D, "initial state")
+        self._transitions = Transitions(X, Y, self.layout)
+        gp_data = self._transitions.gp_data(X, Y)
         options = dict(model_options or {})
         if num_induced_points is None:
             self.mgpr = MGPR(gp_data, **options)
         else:
             self.mgpr = SMGPR(gp_data, num_induced_points, **options)
 
-        m0 = X[0:1, :D] if m_init is None else m_init
-        S0 = 0.01 * np.eye(D) if S_init is None else S_init
-        m0, S0 = check_gaussian(m0, S0, D, "initial state")
-        self._rollout = Rollout(controller, reward, D, U, self.angle_indices,
-                                self.policy_input_noise, horizon, m0, S0)
+        self._rollout = Rollout(controller, reward, self.layout, U, self.policy_input_noise,
+                                horizon, m0, S0)
         self._policy_optimizer = GuardedScipy()
+
+    def _check_controller(self, controller):
+        """``controller`` follows the protocol, reads the policy's features and returns U
+        actions (:func:`pilco.validation.check_controller`, whose size message is about
+        angles: a subset of dimensions from ``policy_indices`` is reported here)."""
+        layout = self.layout
+        size = getattr(controller, "state_dim", None)
+        if (layout.policy_pick is not None and isinstance(size, (int, np.integer))
+                and size != layout.policy_dim):
+            raise ValueError(
+                f"controller.state_dim is {size} but the policy input has dimension "
+                f"{layout.policy_dim} (the features of policy_indices "
+                f"{list(layout.policy_indices)}: one per dimension, two per angle)")
+        return check_controller(controller, layout.policy_dim, self.control_dim,
+                                self.state_dim)
 
     # -- properties ---------------------------------------------------------------------
     @property
@@ -109,8 +151,7 @@ class PILCO(gpflow.base.Module):
 
     @controller.setter
     def controller(self, value):
-        self._rollout.controller = check_controller(value, self.feature_dim, self.control_dim,
-                                                    self.state_dim)
+        self._rollout.controller = self._check_controller(value)
         self._policy_optimizer = GuardedScipy()  # its compiled objective saw the old one
 
     def retrace(self) -> None:
@@ -141,25 +182,78 @@ class PILCO(gpflow.base.Module):
 
     @property
     def m_init(self) -> np.ndarray:
+        """Means of the start distributions, one row per task: [T, D] ([1, D] for one).
+
+        Setting it keeps the covariance(s): a shared ``S_init [D, D]`` serves any number
+        of rows; with one covariance per task the number of rows must stay T (use
+        :meth:`set_initial` to change both)."""
         return self._rollout.m_init.numpy()
 
     @m_init.setter
     def m_init(self, value):
-        m, _ = check_gaussian(value, self._rollout.S_init.numpy(), self.state_dim, "initial state")
-        self._rollout.m_init.assign(m)
+        if self._shared_S:
+            S = self._rollout.S_init.numpy()[0]
+        else:
+            S = self._rollout.S_init.numpy()
+            rows = np.shape(value)[0] if np.ndim(value) == 2 else 1
+            if rows != self.num_tasks:
+                raise ValueError(
+                    f"m_init has {rows} start(s) but S_init holds one covariance per task "
+                    f"for {self.num_tasks} tasks: set both with set_initial(m_init, S_init)")
+        self.set_initial(value, S)
 
     @property
     def S_init(self) -> np.ndarray:
-        return self._rollout.S_init.numpy()
+        """Covariance of the start distributions: [D, D] when one serves every task (and
+        always with one task), [T, D, D] with one per task."""
+        S = self._rollout.S_init.numpy()
+        return S[0] if self._shared_S else S
 
     @S_init.setter
     def S_init(self, value):
-        self._rollout.S_init.assign(
-            check_covariance(value, self.state_dim, "initial state covariance"))
+        self.set_initial(self.m_init, value)  # [D, D]: shared; [T, D, D]: one per task
+
+    @property
+    def num_tasks(self) -> int:
+        """T, the number of start distributions (tasks) the policy objective sums over."""
+        return self._rollout.num_tasks
+
+    def set_initial(self, m_init, S_init) -> None:
+        """Replace the start distributions: ``m_init`` [D], [1, D] or [T, D] and
+        ``S_init`` [D, D] (shared by all tasks) or [T, D, D] (one per task). A new number
+        of tasks retraces the policy objective at its next use."""
+        m, S, shared = check_starts(m_init, S_init, self.state_dim, "initial state")
+        if self._rollout.set_starts(m, S):
+            self._policy_optimizer = GuardedScipy()  # its compiled objective is a trace
+        self._shared_S = shared
+
+    @property
+    def context_indices(self):
+        """The context dimensions (constant through an episode, not predicted)."""
+        return self.layout.context_indices
+
+    @property
+    def dynamics_indices(self):
+        """The state dimensions whose features the dynamics GPs read."""
+        return self.layout.dynamics_indices
+
+    @property
+    def policy_indices(self):
+        """The state dimensions whose features the policy reads."""
+        return self.layout.policy_indices
+
+    @property
+    def policy_dim(self) -> int:
+        """The policy's input size (its ``state_dim``): the features of
+        :attr:`policy_indices` (``feature_dim`` when the policy reads every dimension)."""
+        return self.layout.policy_dim
 
     @property
     def mgpr(self) -> MGPR:
-        """The dynamics model (GP inputs [N, F + U] -> state differences [N, D])."""
+        """The dynamics model: GP inputs [N, Fd + U] (the features of
+        :attr:`dynamics_indices`, then the actions) -> differences of the predicted
+        (non-context) dimensions [N, E]; without context and index sets Fd = F and
+        E = D."""
         return self._mgpr
 
     @mgpr.setter
@@ -174,7 +268,8 @@ class PILCO(gpflow.base.Module):
 
     # -- data -------------------------------------------------------------------------------
     def gp_inputs(self, X) -> np.ndarray:
-        """Raw ``[x, u]`` rows [N, D + U] -> GP inputs [N, F + U] (angles as sin, cos)."""
+        """Raw ``[x, u]`` rows [N, D + U] -> GP inputs [N, Fd + U] (angles as sin, cos;
+        only the dynamics dimensions)."""
         return self._transitions.gp_inputs(X)
 
     def set_data(self, data, noise_scales=None):
@@ -186,29 +281,43 @@ class PILCO(gpflow.base.Module):
         self._transitions.replace(self.mgpr, data, noise_scales)
 
     def set_gp_data(self, gp_data, noise_scales=None):
-        """Give the dynamics model GP inputs and targets ``(X [N, F + U], Y [N, D])``
+        """Give the dynamics model GP inputs and targets ``(X [N, Fd + U], Y [N, E])``
         directly (angles as sin, cos columns that need not come from any angle). With angle
-        dimensions the raw transitions are then unknown: :attr:`data` and :meth:`save`
-        raise a ValueError until :meth:`set_data` gives raw ones. ``noise_scales``: as in
-        :meth:`set_data`."""
+        or context dimensions (or ``dynamics_indices``) the raw transitions are then
+        unknown: :attr:`data` and :meth:`save` raise a ValueError until :meth:`set_data`
+        gives raw ones. ``noise_scales``: as in :meth:`set_data`."""
         self._transitions.replace_gp_data(self.mgpr, gp_data, noise_scales)
 
     def one_step_prediction(self, X):
         """Predicted state differences ``x_{t+1} - x_t`` at raw transition inputs.
 
         Shapes: X [N, D + U] (raw states, angles as angles, then actions) -> mean [N, D],
-        variance [N, D] (NumPy), the GP's latent variance plus its noise variance.
+        variance [N, D] (NumPy), the GP's latent variance plus its noise variance (0 and
+        0 in the context dimensions, which do not change).
         """
         X = check_columns(X, self.state_dim + self.control_dim, "X", "(state, then action)")
         mean, var = self.mgpr.predict_f(self.gp_inputs(X))
-        return np.asarray(mean), np.asarray(var) + np.asarray(self.mgpr.noise_variance)
+        var = np.asarray(var) + np.asarray(self.mgpr.noise_variance)
+        return self.layout.to_state(mean), self.layout.to_state(var)
 
     # -- prediction -------------------------------------------------------------------------
-    def _initial(self, m, s, horizon):
-        if m is None:
-            m = self._rollout.m_init.numpy()
-        if s is None:
-            s = self._rollout.S_init.numpy()
+    def _initial(self, m, s, horizon, task):
+        """The start of a prediction: ``m``, ``s`` as given, the missing ones from the
+        start distribution of ``task`` (which may be omitted with one task)."""
+        if m is None or s is None:
+            if task is None:
+                if self.num_tasks > 1:
+                    raise ValueError(
+                        f"the agent has {self.num_tasks} start distributions (tasks): pass "
+                        f"task=i or the start (m, s) to predict from")
+                task = 0
+            task = check_task(task, self.num_tasks)
+            if m is None:
+                m = self._rollout.m_init.numpy()[task : task + 1]
+            if s is None:
+                s = self._rollout.S_init.numpy()[task]
+        elif task is not None:
+            raise ValueError("give either task or the start (m, s), not both")
         m, s = check_gaussian(m, s, self.state_dim, "initial state")
         H = self.horizon if horizon is None else check_positive_int(horizon, "horizon")
         self._rollout.refresh(self.mgpr)
@@ -220,25 +329,29 @@ class PILCO(gpflow.base.Module):
         self._rollout.refresh(self.mgpr)
         return self._rollout.step(m, s, self._rollout.dynamics(), self.controller.prepare())
 
-    def predict(self, m=None, s=None, horizon: Optional[int] = None):
+    def predict(self, m=None, s=None, horizon: Optional[int] = None,
+                task: Optional[int] = None):
         """Predicted final state and total expected reward of steps 1..H.
 
-        Shapes: m [1, D], s [D, D] (default: the initial state) -> m_H [1, D], S_H [D, D],
-        total_reward [1, 1].
+        Shapes: m [1, D], s [D, D] (default: the start distribution of ``task``, which
+        may be omitted when there is one) -> m_H [1, D], S_H [D, D], total_reward [1, 1].
         """
-        return self._rollout.total_reward(*self._initial(m, s, horizon))
+        return self._rollout.total_reward(*self._initial(m, s, horizon, task))
 
-    def predict_trajectory(self, m=None, s=None, horizon: Optional[int] = None):
+    def predict_trajectory(self, m=None, s=None, horizon: Optional[int] = None,
+                           task: Optional[int] = None):
         """Predicted state distributions of steps 0..H.
 
-        Shapes: m [1, D], s [D, D] -> M [H+1, D], S [H+1, D, D] (index 0 is the start).
+        Shapes: m [1, D], s [D, D] -> M [H+1, D], S [H+1, D, D] (index 0 is the start);
+        defaults as :meth:`predict`.
         """
-        M, S, _, _ = self.predict_trajectory_with_rewards(m, s, horizon)
+        M, S, _, _ = self.predict_trajectory_with_rewards(m, s, horizon, task)
         return M, S
 
-    def predict_trajectory_with_rewards(self, m=None, s=None, horizon: Optional[int] = None):
+    def predict_trajectory_with_rewards(self, m=None, s=None, horizon: Optional[int] = None,
+                                        task: Optional[int] = None):
         """As :meth:`predict_trajectory`, plus the reward mean [H+1] and variance [H+1]."""
-        return self._rollout.trajectory(*self._initial(m, s, horizon))
+        return self._rollout.trajectory(*self._initial(m, s, horizon, task))
 
     # -- learning ---------------------------------------------------------------------------
     def optimize_models(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
@@ -257,18 +370,25 @@ class PILCO(gpflow.base.Module):
         return losses
 
     def expected_return(self) -> float:
-        """Total expected reward of the current policy from the initial state distribution."""
+        """Total expected reward of the current policy from the initial state distribution
+        (summed over the tasks when there are several): minus the policy objective."""
         self._rollout.refresh(self.mgpr)
         return float(-self._rollout.policy_loss().numpy())
+
+    def expected_returns(self) -> np.ndarray:
+        """Total expected reward of the current policy from each task's start
+        distribution: [T] (their sum is :meth:`expected_return`)."""
+        self._rollout.refresh(self.mgpr)
+        return np.array([float(t.numpy()[0, 0]) for t in self._rollout.task_totals()])
 
     def optimize_policy(self, maxiter: int = 50, restarts: int = 1, seed: Optional[int] = None,
                         callback: Optional[Callable[[int], None]] = None,
                         method: str = "L-BFGS-B", min_rel_improvement: Optional[float] = None,
                         patience: int = 10):
-        """Maximise the predicted total reward over the policy parameters; returns the best
-        total reward. The best policy evaluated by any run is kept (see
-        :func:`pilco.models.policy_search.search_policy` for restarts, failures and
-        interruptions).
+        """Maximise the predicted total reward (summed over the tasks) over the policy
+        parameters; returns the best total reward. The best policy evaluated by any run is
+        kept (see :func:`pilco.models.policy_search.search_policy` for restarts, failures
+        and interruptions).
 
         ``method`` is ``"L-BFGS-B"`` or ``"BFGS"`` (a dense inverse-Hessian update, what
         the MATLAB release's ``minimize`` uses for up to 1000 parameters).
@@ -293,7 +413,8 @@ class PILCO(gpflow.base.Module):
 
     # -- acting -----------------------------------------------------------------------------
     def compute_action(self, x) -> np.ndarray:
-        """The policy's action at a measured state: x [1, D] (or [D]) -> u [1, U]."""
+        """The policy's action at a measured state: x [1, D] (or [D]) -> u [1, U] (the
+        whole state, context included; the policy reads its dimensions)."""
         x = check_state_row(x, self.state_dim, "state")
         return self._rollout.action(tf.convert_to_tensor(x)).numpy()
 
@@ -310,5 +431,11 @@ class PILCO(gpflow.base.Module):
 
     def export_policy(self, path) -> str:
         """Write the trained policy to a small ``.npz`` for :func:`pilco.deploy.load_policy`;
-        returns the absolute path written."""
+        returns the absolute path written. A policy reading a subset of the state
+        (``policy_indices``) cannot be exported yet: policy files feed it every feature."""
+        if self.layout.policy_pick is not None:
+            raise ValueError(
+                f"cannot export a policy that reads only the state dimensions "
+                f"{list(self.policy_indices)} (policy_indices): policy files and "
+                f"pilco.deploy feed the policy every feature of the state")
         return storage.export_policy(self.controller, path, self.state_dim, self.angle_indices)

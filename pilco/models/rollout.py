@@ -1,23 +1,27 @@
 """The compiled, moment-matched rollout of a policy through the GP dynamics model.
 
 One step (MATLAB PILCO's ``propagate``) maps the state distribution ``x_t ~ N(m, s)`` to
-``x_{t+1}``:
+``x_{t+1}``; which dimensions each part reads is the agent's
+:class:`~pilco.models.layout.StateLayout` (MATLAB's ``poli``, ``dyni``, ``dyno``):
 
-1. angles are replaced by (sin, cos) features, giving the GP/policy input ``z``;
-2. the policy returns ``u ~ N(Mu, Su)`` for the state distribution (optionally it sees a
-   noisy measurement ``s + diag(noise) / 2``, ``noise`` being the dynamics GPs'
-   likelihood variances, as some MATLAB PILCO versions do);
-3. the dynamics GPs predict the state difference ``Δ`` at ``[z, u]``;
-4. ``x_{t+1} = x_t + Δ`` with every cross-covariance kept.
+1. angles are replaced by (sin, cos) features ``z``; the policy reads the features
+   ``z_p`` of its dimensions, the dynamics GPs those ``z_d`` of theirs;
+2. the policy returns ``u ~ N(Mu, Su)`` for the distribution of ``z_p`` (optionally it
+   sees a noisy measurement ``s + diag(noise) / 2``, ``noise`` being the dynamics GPs'
+   likelihood variances, 0 for context dimensions, as some MATLAB PILCO versions do);
+3. the dynamics GPs predict the difference ``Δ`` of the predicted dimensions at
+   ``[z_d, u]``;
+4. ``x_{t+1} = x_t + Δ`` (context dimensions unchanged) with every cross-covariance
+   kept.
 
-The whole horizon is one ``tf.while_loop`` inside a compiled function, traced once; the
+The policy objective is the sum, over one or more start distributions (tasks), of the
+expected rewards of ``horizon`` steps. Each horizon is one ``tf.while_loop`` inside a
+compiled function, traced once; the
 dynamics GP's factorisation (Cholesky, ``beta`` and ``K^-1``) does not depend on the
 policy: :meth:`Rollout.refresh` computes it once per policy optimisation and stores it
 in non-trainable variables that the compiled functions read.
 """
 from __future__ import annotations
-
-from typing import Sequence
 
 import gpflow
 import tensorflow as tf
@@ -26,46 +30,70 @@ from gpflow.config import default_float
 from .. import moments
 from ..angles import augment_state
 from ..protocols import Controller, Reward
+from .layout import StateLayout
 
 __all__ = ["Rollout"]
+
+
+def _constant(pick):
+    """A one-hot selection of :class:`StateLayout` as a constant, or None (identity)."""
+    return None if pick is None else tf.constant(pick, dtype=default_float())
+
+
+def _select(M, S, pick):
+    """Moments of a selection ``z P`` of ``z ~ N(M, S)``: [1, F], [F, F], P [F, K] ->
+    [1, K], [K, K] (unchanged when ``pick`` is None)."""
+    if pick is None:
+        return M, S
+    return tf.matmul(M, pick), tf.matmul(pick, tf.matmul(S, pick), transpose_a=True)
+
+
+def _right(A, pick):
+    """``A P``: the columns of ``A`` that ``pick`` [F, K] selects (``A`` if None)."""
+    return A if pick is None else tf.matmul(A, pick)
 
 
 class Rollout(gpflow.base.Module):
     """Moment-matched multi-step prediction of a controller, dynamics model and reward.
 
     Args:
-        controller: a :class:`pilco.protocols.Controller` reading the angle-augmented state.
-        reward: a :class:`pilco.protocols.Reward` on the raw state.
-        state_dim: D; ``control_dim``: U; ``angle_indices``: the angle dimensions.
+        controller: a :class:`pilco.protocols.Controller` reading the policy features
+            (``state_dim == layout.policy_dim``).
+        reward: a :class:`pilco.protocols.Reward` on the raw state (D dimensions).
+        layout: the :class:`StateLayout` (state size D, angles, context and index sets).
+        control_dim: U.
         policy_input_noise: the policy sees ``s + diag(noise) / 2`` instead of ``s``.
-        horizon, m_init [1, D], S_init [D, D]: the policy objective's horizon and start
-            distribution, kept in the variables of the same names (checked by the caller).
+        horizon: the policy objective's horizon.
+        m_init [T, D], S_init [T, D, D]: the T start distributions (tasks) of the policy
+            objective, kept in the variables of the same names (checked by the caller).
     """
 
-    def __init__(self, controller: Controller, reward: Reward, state_dim: int,
-                 control_dim: int, angle_indices: Sequence[int], policy_input_noise: bool,
-                 horizon: int, m_init, S_init):
+    def __init__(self, controller: Controller, reward: Reward, layout: StateLayout,
+                 control_dim: int, policy_input_noise: bool, horizon: int, m_init, S_init):
         super().__init__()
         self.horizon = tf.Variable(horizon, trainable=False, dtype=tf.int32, name="horizon")
-        self.m_init = tf.Variable(m_init, trainable=False, name="m_init")
-        self.S_init = tf.Variable(S_init, trainable=False, name="S_init")
+        self.layout = layout
+        self.state_dim = D = layout.state_dim
+        self.m_init = tf.Variable(m_init, shape=[None, D], trainable=False, name="m_init")
+        self.S_init = tf.Variable(S_init, shape=[None, D, D], trainable=False, name="S_init")
+        self.num_tasks = int(m_init.shape[0])
         self._controller = controller
         self._reward = reward
-        self.state_dim = D = state_dim
-        self.angle_indices = tuple(angle_indices)
+        self.angle_indices = layout.angle_indices
         self.policy_input_noise = policy_input_noise
-        inputs = D + len(self.angle_indices) + control_dim  # GP input size
+        E = layout.num_outputs
+        inputs = layout.gp_state_dim + control_dim  # GP input size
         f = default_float()
-        # The dynamics model as of the last refresh(): its centers [n, inputs], beta [D, n],
-        # K^-1 [D, n, n], lengthscales [D, inputs], signal and noise variances [D].
+        # The dynamics model as of the last refresh(): its centers [n, inputs], beta [E, n],
+        # K^-1 [E, n, n], lengthscales [E, inputs], signal and noise variances [E].
         self._centers = tf.Variable(tf.zeros([0, inputs], f), shape=[None, inputs],
                                     trainable=False)
-        self._beta = tf.Variable(tf.zeros([D, 0], f), shape=[D, None], trainable=False)
-        self._inverse = tf.Variable(tf.zeros([D, 0, 0], f), shape=[D, None, None],
+        self._beta = tf.Variable(tf.zeros([E, 0], f), shape=[E, None], trainable=False)
+        self._inverse = tf.Variable(tf.zeros([E, 0, 0], f), shape=[E, None, None],
                                     trainable=False)
-        self._lengthscales = tf.Variable(tf.ones([D, inputs], f), trainable=False)
-        self._signal_variance = tf.Variable(tf.ones([D], f), trainable=False)
-        self._noise_variance = tf.Variable(tf.ones([D], f), trainable=False)
+        self._lengthscales = tf.Variable(tf.ones([E, inputs], f), trainable=False)
+        self._signal_variance = tf.Variable(tf.ones([E], f), trainable=False)
+        self._noise_variance = tf.Variable(tf.ones([E], f), trainable=False)
         self.retrace()
 
     def retrace(self) -> None:
@@ -74,6 +102,18 @@ class Rollout(gpflow.base.Module):
         self.total_reward = tf.function(self._total_reward, autograph=False)
         self.trajectory = tf.function(self._trajectory, autograph=False)
         self.action = tf.function(self._action, autograph=False)
+
+    def set_starts(self, m_init, S_init) -> bool:
+        """Assign the start distributions m_init [T, D], S_init [T, D, D] (checked by the
+        caller); returns True if the number of tasks T changed, which drops the compiled
+        functions (the objective's sum over tasks is unrolled in its trace)."""
+        self.m_init.assign(m_init)
+        self.S_init.assign(S_init)
+        changed = int(m_init.shape[0]) != self.num_tasks
+        self.num_tasks = int(m_init.shape[0])
+        if changed:
+            self.retrace()
+        return changed
 
     @property
     def controller(self) -> Controller:
@@ -119,25 +159,46 @@ class Rollout(gpflow.base.Module):
         """One moment-matched step: m [1, D], s [D, D] -> m' [1, D], s' [D, D].
 
         ``dynamics`` is :meth:`dynamics`'s result, ``prepared`` the controller's
-        ``prepare()`` result.
+        ``prepare()`` result. With the identity layout (no context, both the policy and
+        the GP read every dimension) every selection below is skipped: the step is the
+        plain agent's, operation for operation.
         """
+        layout = self.layout
         ang = self.angle_indices
-        Mf, Sf, Cf = augment_state(m, s, ang)
+        policy_pick = _constant(layout.policy_pick)  # [F, Fp] or None
+        dynamics_pick = _constant(layout.dynamics_pick)  # [F, Fd] or None
+        place = _constant(layout.output_place)  # [E, D] or None
+        Mf, Sf, Cf = augment_state(m, s, ang)  # z: [1, F], [F, F], inv(s) Cov[x, z] [D, F]
         if self.policy_input_noise:
-            noisy = s + tf.linalg.diag(0.5 * tf.convert_to_tensor(self._noise_variance))
-            Mp, Sp, _ = augment_state(m, noisy, ang)
+            noise = 0.5 * tf.convert_to_tensor(self._noise_variance)  # [E]
+            if place is not None:  # context dimensions are measured without noise
+                noise = tf.linalg.matvec(place, noise, transpose_a=True)  # [D]
+            noisy = s + tf.linalg.diag(noise)
+            Mn, Sn, _ = augment_state(m, noisy, ang)
         else:
-            Mp, Sp = Mf, Sf
-        Mu, Su, Cu = self.controller.moments(Mp, Sp, True, prepared)
-        cov_fu = tf.matmul(Sf, Cu)  # Cov[z, u], [F, U]
-        m_in = tf.concat([Mf, Mu], axis=1)
+            Mn, Sn = Mf, Sf
+        Mp, Sp = _select(Mn, Sn, policy_pick)
+        Mu, Su, Cu = self.controller.moments(Mp, Sp, True, prepared)  # Cu [Fp, U]
+        # Cov[z, u] = Cov[z, z_p] inv(S_p) Cov[z_p, u] (MATLAB propagate's S(j,i) * C)
+        cov_fu = tf.matmul(_right(Sf, policy_pick), Cu)  # [F, U]
+        Md_in, Sd_in = _select(Mf, Sf, dynamics_pick)  # z_d: [1, Fd], [Fd, Fd]
+        cov_du = cov_fu if dynamics_pick is None else tf.matmul(
+            dynamics_pick, cov_fu, transpose_a=True)  # Cov[z_d, u], [Fd, U]
+        m_in = tf.concat([Md_in, Mu], axis=1)
         s_in = tf.concat(
-            [tf.concat([Sf, cov_fu], 1), tf.concat([tf.transpose(cov_fu), Su], 1)], 0
+            [tf.concat([Sd_in, cov_du], 1), tf.concat([tf.transpose(cov_du), Su], 1)], 0
         )
-        Md, Sd, Vd = moments.predict(m_in, s_in, dynamics)
+        Md, Sd, Vd = moments.predict(m_in, s_in, dynamics)  # [1, E], [E, E], [Fd + U, E]
         sCf = tf.matmul(s, Cf)  # Cov[x, z], [D, F]
-        cov_x_in = tf.concat([sCf, tf.matmul(sCf, Cu)], axis=1)  # Cov[x, (z, u)]
-        cov_xd = tf.matmul(cov_x_in, Vd)  # Cov[x, Δ], [D, D]
+        cov_xu = tf.matmul(_right(sCf, policy_pick), Cu)  # Cov[x, u], [D, U]
+        cov_x_in = tf.concat([_right(sCf, dynamics_pick), cov_xu], axis=1)  # Cov[x, (z_d, u)]
+        cov_xd = tf.matmul(cov_x_in, Vd)  # Cov[x, Δ], [D, E]
+        if place is not None:
+            # Δ of the predicted dimensions placed in the state, 0 in the context ones:
+            # their mean, variance and covariance with each other stay as they were
+            Md = tf.matmul(Md, place)  # [1, D]
+            Sd = tf.matmul(place, tf.matmul(Sd, place), transpose_a=True)  # [D, D]
+            cov_xd = tf.matmul(cov_xd, place)  # [D, D]
         m_next = m + Md
         s_next = s + Sd + cov_xd + tf.transpose(cov_xd)
         return m_next, 0.5 * (s_next + tf.transpose(s_next))
@@ -165,13 +226,26 @@ class Rollout(gpflow.base.Module):
         )
         return m, s, total
 
+    def task_totals(self):
+        """Total expected reward of ``horizon`` steps from each start distribution
+        ``N(m_init[i], S_init[i])``, with the dynamics model of the last refresh: a list
+        of T tensors [1, 1]. Each task's horizon is its own call of the compiled
+        :meth:`total_reward` (one trace serves all, the tasks have the same shapes)."""
+        m0 = tf.convert_to_tensor(self.m_init)
+        s0 = tf.convert_to_tensor(self.S_init)
+        horizon = tf.convert_to_tensor(self.horizon)
+        D = self.state_dim
+        return [self.total_reward(tf.reshape(m0[i], [1, D]), s0[i], horizon)[2]
+                for i in range(self.num_tasks)]
+
     def policy_loss(self):
-        """The policy objective: minus the total expected reward of ``horizon`` steps from
-        ``N(m_init, S_init)`` (a scalar), with the dynamics model of the last refresh."""
-        _, _, total = self.total_reward(
-            tf.convert_to_tensor(self.m_init), tf.convert_to_tensor(self.S_init),
-            tf.convert_to_tensor(self.horizon),
-        )
+        """The policy objective (a scalar): minus the sum over the T start distributions
+        of the total expected reward of ``horizon`` steps. Traced inside the optimiser's
+        compiled function, the whole sum and its gradient are one graph."""
+        totals = self.task_totals()
+        total = totals[0]
+        for t in totals[1:]:
+            total = total + t
         return -total[0, 0]
 
     def _trajectory(self, m0, s0, horizon):
@@ -202,6 +276,9 @@ class Rollout(gpflow.base.Module):
         f = default_float()
         D = self.state_dim
         Mf, _, _ = augment_state(x, tf.zeros([D, D], f), self.angle_indices)
-        F = D + len(self.angle_indices)
+        pick = _constant(self.layout.policy_pick)
+        if pick is not None:
+            Mf = tf.matmul(Mf, pick)
+        F = Mf.shape[-1]
         M, _, _ = self.controller.moments(Mf, tf.zeros([F, F], f), True)
         return M

@@ -6,9 +6,16 @@ The layout of agent files (``format: "pilco-agent"``) and policy files
 under the key ``__meta__``. Every trainable quantity is stored twice: its value and its
 raw, unconstrained variable, so a reloaded agent computes bit-identical predictions.
 
+There is one way to save an agent: ``agent.save(path)`` and ``PILCO.load(path)``
+(:class:`pilco.models.PILCO`), which the run directory's ``agent.npz`` uses
+(:class:`pilco.experiment.RunStore`); :func:`save_agent` and :func:`load_agent` are the
+bodies of those methods. A policy file is a different thing: the policy alone, evaluated
+on a robot with NumPy by :func:`pilco.deploy.load_policy`; ``agent.export_policy(path)``
+writes it, and :func:`export_policy` also writes one for a controller used without an
+agent.
+
 This module works on the public attributes of the components (controllers, rewards,
-dynamics models) and of the agent; :class:`pilco.models.PILCO` uses it for ``save``,
-``load`` and ``export_policy``, and :mod:`pilco.persistence` is the functional front end.
+dynamics models) and of the agent.
 """
 from __future__ import annotations
 
@@ -25,7 +32,7 @@ from ..controllers import LinearController, RbfController, squash_sat, squash_si
 from ..deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
 from ..files import write_npz_atomic
 from ..rewards import (AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward,
-                       LinearReward)
+                       LinearMapReward, LinearReward)
 from ..validation import check_format_version, check_path
 from .mgpr import MGPR
 from .smgpr import SMGPR
@@ -36,7 +43,10 @@ __all__ = ["AGENT_FORMAT", "AGENT_VERSION", "POLICY_FORMAT", "agent_arrays", "re
 logger = logging.getLogger(__name__)
 
 AGENT_FORMAT = "pilco-agent"
-AGENT_VERSION = 1
+#: newest agent format: 2 adds context dimensions, the index sets the dynamics model and
+#: the policy read, and several start distributions (tasks). An agent using none of them
+#: is written as version 1, readable by every version of pilco.
+AGENT_VERSION = 2
 
 _SQUASHES = {"squash_sin": squash_sin, "squash_sat": squash_sat}
 # Short names used in policy files (read by pilco.deploy).
@@ -178,9 +188,15 @@ def _reward_spec(reward, arrays, prefix: str) -> dict:
     if kind is CartPoleReward:
         return dict(type="CartPoleReward", pendulum_length=reward.pendulum_length,
                     width=reward.width)
+    if kind is LinearMapReward:
+        arrays[prefix + "A"] = reward.A.numpy()
+        arrays[prefix + "b"] = reward.b.numpy()
+        return dict(type="LinearMapReward", state_dim=reward.state_dim,
+                    base=_reward_spec(reward.base_reward, arrays, prefix + "base/"))
     raise TypeError(
         f"cannot save a reward of type {kind.__name__}: supported are ExponentialReward, "
-        f"AxisBumpsReward, LinearReward, CombinedRewards and CartPoleReward"
+        f"AxisBumpsReward, LinearReward, CombinedRewards, CartPoleReward and "
+        f"LinearMapReward"
     )
 
 
@@ -201,6 +217,10 @@ def _build_reward(spec: dict, arrays, prefix: str, path):
         return CombinedRewards(spec["state_dim"], parts, coefs=_get(arrays, prefix + "coefs", path))
     if kind == "CartPoleReward":
         return CartPoleReward(pendulum_length=spec["pendulum_length"], width=spec["width"])
+    if kind == "LinearMapReward":
+        base = _build_reward(spec["base"], arrays, prefix + "base/", path)
+        return LinearMapReward(spec["state_dim"], base, _get(arrays, prefix + "A", path),
+                               _get(arrays, prefix + "b", path))
     raise ValueError(f"{path}: unknown reward type {kind!r}")
 
 
@@ -246,10 +266,13 @@ def agent_arrays(agent) -> Dict[str, np.ndarray]:
     """Everything :func:`read_agent` needs to rebuild ``agent``, as named arrays.
 
     Stored: raw data ``X [N, D + U]``, ``Y [N, D]`` and their noise factors ``[N]``; GP
-    hyperparameters (lengthscales [E, F + U], signal and noise variances [E], inducing
-    inputs Z [M, F + U] for a sparse model) and settings; controller type, settings and
+    hyperparameters (lengthscales [E, Fd + U], signal and noise variances [E], inducing
+    inputs Z [M, Fd + U] for a sparse model) and settings; controller type, settings and
     parameters; reward type and parameters; horizon, ``m_init`` [1, D],
-    ``S_init`` [D, D], angle indices, ``num_induced_points`` and ``policy_input_noise``.
+    ``S_init`` [D, D], angle indices, ``num_induced_points`` and ``policy_input_noise``;
+    in version 2 also ``m_init`` [T, D] with ``S_init`` [D, D] or [T, D, D] (T tasks)
+    and the non-default index sets (``context_indices``, ``dynamics_indices``,
+    ``policy_indices``).
     Raises :class:`TypeError` for components that cannot be stored (custom controllers,
     rewards, squash functions or dynamics models).
     """
@@ -260,8 +283,10 @@ def agent_arrays(agent) -> Dict[str, np.ndarray]:
     arrays["data/noise_scales"] = agent.mgpr.noise_scales
     arrays["m_init"] = agent.m_init
     arrays["S_init"] = agent.S_init
+    layout = agent.layout.settings()  # the index sets that differ from their defaults
+    version = 2 if layout or agent.num_tasks > 1 else 1
     meta = dict(
-        format=AGENT_FORMAT, version=AGENT_VERSION, pilco_version=__version__,
+        format=AGENT_FORMAT, version=version, pilco_version=__version__,
         state_dim=agent.state_dim, control_dim=agent.control_dim, horizon=agent.horizon,
         angle_indices=list(agent.angle_indices),
         num_induced_points=(None if agent.num_induced_points is None
@@ -271,6 +296,7 @@ def agent_arrays(agent) -> Dict[str, np.ndarray]:
         reward=_reward_spec(agent.reward, arrays, "reward/"),
         gp=_gp_spec(agent.mgpr, arrays, trainable),
         trainable=trainable,
+        **layout,
     )
     arrays[META_KEY] = np.array(json.dumps(meta))
     return arrays
@@ -295,6 +321,8 @@ def read_agent(path) -> Tuple[Dict[str, Any], Any]:
         num_induced_points=meta["num_induced_points"],
         policy_input_noise=meta["policy_input_noise"],
         model_options={k: float(spec[k]) for k in _GP_SETTINGS if k in spec and k in accepted},
+        **{k: meta[k] for k in ("context_indices", "dynamics_indices", "policy_indices")
+           if k in meta},
     )
     return kwargs, lambda gp: restore_dynamics(gp, arrays, trainable, path)
 
@@ -307,8 +335,18 @@ def _deterministic_jitter() -> float:
 
 def policy_arrays(controller, state_dim: int,
                   angle_indices: Sequence[int]) -> Dict[str, np.ndarray]:
-    """The policy file of ``controller`` as named arrays (the layout is described by
-    :func:`pilco.persistence.export_policy`)."""
+    """The policy file of ``controller`` as named arrays.
+
+    The file holds, as arrays: ``state_dim``, ``angle_indices`` [A], ``max_action`` [U],
+    ``unsquashed_variance`` (the variance of the unsquashed action at a known state: the
+    RBF policy's moment-matching jitter, 0 for the linear policy), and for an RBF policy
+    ``centers`` [n, F], ``beta`` [U, n] (``(K + noise I)^-1 targets`` per output),
+    ``targets`` [n, U], ``lengthscales`` [U, F], ``variance`` [U], ``noise`` [U]; for a
+    linear policy ``W`` [U, F] and ``b`` [1, U]. ``F = D + A``: the policy reads the state
+    with each angle replaced by (sin, cos), appended after the other dimensions. The JSON
+    metadata names the controller kind (``rbf``/``linear``) and squash (``sin``/``sat``/
+    ``none``).
+    """
     angle_indices = [int(a) for a in angle_indices]
     squash = _SQUASH_KIND[_squash_name(controller.squash)]
     arrays: Dict[str, np.ndarray] = dict(
@@ -344,14 +382,16 @@ def policy_arrays(controller, state_dim: int,
 
 # -- files ----------------------------------------------------------------------------------
 def save_agent(agent, path) -> str:
-    """Write :func:`agent_arrays` of ``agent`` to ``path`` atomically; returns the path."""
+    """Write :func:`agent_arrays` of ``agent`` to ``path`` atomically; returns the path.
+    The body of ``PILCO.save``."""
     written = write_npz_atomic(check_path(path), agent_arrays(agent))
     logger.info("saved PILCO agent (%d transitions) to %s", len(agent.data[0]), written)
     return written
 
 
 def load_agent(agent_class, path):
-    """Rebuild the agent stored at ``path`` as an instance of ``agent_class`` (PILCO)."""
+    """Rebuild the agent stored at ``path`` as an instance of ``agent_class`` (PILCO).
+    The body of ``PILCO.load``."""
     try:
         kwargs, restore = read_agent(path)
     except KeyError as err:  # a metadata entry of the format is missing
@@ -363,7 +403,12 @@ def load_agent(agent_class, path):
 
 
 def export_policy(controller, path, state_dim: int, angle_indices: Sequence[int]) -> str:
-    """Write :func:`policy_arrays` to ``path`` atomically; returns the path written."""
+    """Write :func:`policy_arrays` to ``path`` atomically; returns the path written.
+
+    The body of ``PILCO.export_policy``; for a controller used without an agent, pass
+    the measured state's size ``state_dim`` and its ``angle_indices`` (each read by the
+    controller as a (sin, cos) pair), e.g. ``export_policy(controller, path,
+    controller.state_dim, [])`` for a controller that reads the state as it is."""
     written = write_npz_atomic(check_path(path),
                                policy_arrays(controller, state_dim, angle_indices))
     logger.info("exported %s policy to %s", type(controller).__name__, written)

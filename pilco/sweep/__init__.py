@@ -7,8 +7,11 @@ results are aggregated per setting into ``sweep.json``, a table and figures.
 ==============  =================================================================
 module          job
 ==============  =================================================================
-``cli``         the command line: seeds, ``--set``/``--grid``, checks, the report
+``cli``         the command line: its flags, the plan of runs, Ray's start, the end
+``flags``       seeds, ``--set``/``--grid``, the settings, their task flags checked
+``preflight``   the directory lock, the check of a ``--address`` cluster
 ``runs``        one Ray task per run, retries, resume, Ctrl-C
+``report``      ``sweep.json``: every finished run aggregated per setting
 ``aggregate``   Wilson intervals, quartiles, per-setting aggregates, the table
 ``figures``     ``success_rate.png`` and ``distance_bands.png``
 ==============  =================================================================

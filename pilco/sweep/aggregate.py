@@ -125,7 +125,8 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
     ``last_episode`` ``{steps_to_target: {median, reached, not_reached}, final_distance:
     {q1, median, q3}, min_distance: {q1, median, q3}}``, ``seconds_per_run`` ``{median,
     max}``, ``provenance`` (:func:`provenance_counts`), and ``episodes_to_recover`` like
-    ``episodes_to_solve`` when the summaries have it (adaptation).
+    ``episodes_to_solve`` when the summaries have it (a task whose runs recover from a
+    change, such as damage, report it).
     """
     finished = len(summaries)
     if runs is None:

@@ -4,11 +4,11 @@ A run is ``python -m pilco.tasks TASK --seed S --output RUN_DIR --quiet --no-ren
 --no-figures FLAGS...`` started by :func:`execute_run` inside a Ray task that reserves
 ``cpus_per_run`` CPUs and limits TensorFlow's inter-op and the BLAS libraries' thread
 pools to as many threads (TensorFlow's intra-op pool to one, see
-:func:`thread_environment`), so ``C`` CPUs run ``C / cpus_per_run`` runs side by side
-without oversubscription. The Ray task returns the run's summary (and the tails of its output);
-the driver (:func:`execute`) writes ``summary.json`` and ``sweep-run.json`` into the run
-directory itself, so results reach the driver's disk even when the worker's file system
-is not shared.
+:func:`pilco.runtime.thread_environment`), so ``C`` CPUs run ``C / cpus_per_run`` runs
+side by side without oversubscription. The Ray task returns the run's summary (and the
+tails of its output); the driver (:func:`execute`) writes ``summary.json`` and
+``sweep-run.json`` into the run directory itself, so results reach the driver's disk
+even when the worker's file system is not shared.
 
 A process that exits non-zero or leaves no complete summary raises :class:`RunFailed` in
 its Ray task, which Ray retries (``retry_exceptions``), as it retries a task whose worker
@@ -39,10 +39,11 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from pilco.experiment.signals import signal_handler
 from pilco.files import write_json_atomic
+from pilco.runtime import thread_environment
 
-__all__ = ["RunSpec", "RunFailed", "SweepOutcome", "THREAD_VARIABLES", "SUMMARY", "RUN_RECORD",
-           "ATTEMPTS", "PROGRESS", "thread_environment", "read_json", "summary_complete",
-           "finished_summary", "saved_episodes", "execute_run", "execute"]
+__all__ = ["RunSpec", "RunFailed", "SweepOutcome", "SUMMARY", "RUN_RECORD", "ATTEMPTS",
+           "PROGRESS", "read_json", "summary_complete", "finished_summary", "saved_episodes",
+           "execute_run", "execute"]
 
 logger = logging.getLogger(__name__)
 
@@ -52,10 +53,6 @@ SUMMARY = "summary.json"
 RUN_RECORD = "sweep-run.json"
 #: a run's saved state, written by the run after every episode (what ``--resume`` reads)
 PROGRESS = "progress.json"
-
-#: environment variables that size TensorFlow's and the BLAS libraries' thread pools
-THREAD_VARIABLES = ("TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS", "OMP_NUM_THREADS",
-                    "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 #: lines of a run's standard error kept in the failure report
 TAIL_LINES = 20
@@ -115,22 +112,6 @@ class SweepOutcome:
     failed: List[Tuple[RunSpec, Dict[str, Any]]] = dataclasses.field(default_factory=list)
     not_run: List[RunSpec] = dataclasses.field(default_factory=list)
     interrupted: bool = False
-
-
-def thread_environment(threads: int, base: Optional[Mapping[str, str]] = None
-                       ) -> Dict[str, str]:
-    """``base`` (default ``os.environ``) with TensorFlow's inter-op pool and the
-    OpenMP/OpenBLAS/MKL pools set to ``threads`` threads and TensorFlow's intra-op pool
-    to one: the policy objective's independent groups of output pairs
-    (:func:`pilco.moments.pair_groups`) then run side by side, which uses the CPUs better
-    than splitting each operation (docs/performance.md)."""
-    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
-        raise ValueError(f"threads must be a positive integer, got {threads!r}")
-    env = dict(os.environ if base is None else base)
-    env.update({name: str(threads) for name in THREAD_VARIABLES})
-    env["TF_NUM_INTRAOP_THREADS"] = "1"
-    env.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
-    return env
 
 
 def read_json(path: str) -> Optional[Dict[str, Any]]:

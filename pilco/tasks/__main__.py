@@ -1,11 +1,12 @@
 """``python -m pilco.tasks TASK [flags]``: run one of the paper's experiments."""
 from __future__ import annotations
 
-import os
 import sys
 
+from ..runtime import quiet_tensorflow
+
 # TensorFlow's C++ log lines drown the progress output; pilco logs through `logging`.
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+quiet_tensorflow()
 
 
 def main(argv=None) -> int:

@@ -29,58 +29,41 @@ for the last 10 steps; "success" is the same.
 """
 from __future__ import annotations
 
-import argparse
-from typing import List, Optional, Sequence
+from typing import List
 
 import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
-from ..experiment.cli import (add_common_arguments, finish, learning_settings,
-                              non_negative_float, open_experiment, parse_task_args,
-                              positive_float, positive_int)
 from ..features import angle_features
+from .base import Task
+from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
+                       task_settings)
 
-__all__ = ["build_parser", "init_policy_from_start", "agent_builder", "make_config",
-           "make_experiment", "figures", "main"]
-
-#: settings added to the task after runs were saved, with the values that continue such a
-#: run as it started (``policy_restarts`` was saved; a run saved with restarts restarted
-#: from its first learned episode)
-ADDED_LATER = {"policy_restart_from": 1}
-
-#: 8 episodes: the paper's Python/GPU port took 671 s in all (MATLAB: 1265 s).
-PAPER_SECONDS = {"total": 671.0}
+__all__ = ["CartPoleSettings", "CartPoleTask", "CARTPOLE", "init_policy_from_start"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Every flag of the cart-pole task (common flags with the release's defaults)."""
-    parser = argparse.ArgumentParser(description="PILCO cart-pole swing-up (MATLAB protocol)",
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    add_common_arguments(parser, episodes=8, steps=40, basis_functions=10, policy_iters=150,
-                         model_iters=300, max_data=None, output="runs/cartpole-seed{seed}",
-                         policy_method="BFGS", policy_min_rel_improvement=0.003,
-                         model_min_rel_improvement=5e-4, policy_restarts=2,
-                         policy_restart_when="unsolved", policy_restart_from=5)
-    g = parser.add_argument_group("cart-pole")
-    g.add_argument("--max-force", type=positive_float, default=10.0, help="force bound [N]")
-    g.add_argument("--cost-width", type=positive_float, default=0.25,
-                   help="width [m] of the saturating cost on the tip distance")
-    g.add_argument("--start-std", type=non_negative_float, default=0.1,
-                   help="std of the start state")
-    g.add_argument("--noise-std", type=non_negative_float, default=0.01,
-                   help="measurement noise std")
-    g.add_argument("--threshold", type=positive_float, default=0.1,
-                   help="solved: tip within this distance [m] ...")
-    g.add_argument("--hold-steps", type=positive_int, default=10, help="... for the last N steps")
-    g.add_argument("--squash", choices=("sat", "sin"), default="sat",
-                   help="policy squashing function")
-    g.add_argument("--policy-input-noise", choices=("on", "off"), default="off",
-                   help="'on': the policy sees a noisy measurement of the predicted state "
-                        "(variance + half the dynamics noise), as the release's propagate.m")
-    g.add_argument("--policy-init", choices=("start", "random"), default="start",
-                   help="initial RBF policy: 'start' draws its centers from the start "
-                        "distribution as the MATLAB release does; 'random' from N(0, I)")
-    return parser
+@task_settings(episodes=8, horizon=40, basis_functions=10, policy_iters=150,
+               model_iters=300, output="runs/cartpole-seed{seed}", policy_optimizer="BFGS",
+               policy_min_rel_improvement=0.003, model_min_rel_improvement=5e-4,
+               policy_restarts=2, policy_restart_when="unsolved", policy_restart_from=5)
+class CartPoleSettings(RunSettings):
+    """The cart-pole's settings (the MATLAB release's defaults)."""
+
+    max_force: float = setting(10.0, "force bound [N]", kind=positive_float)
+    cost_width: float = setting(0.25, "width [m] of the saturating cost on the tip distance",
+                                kind=positive_float)
+    start_std: float = setting(0.1, "std of the start state", kind=non_negative_float)
+    noise_std: float = setting(0.01, "measurement noise std", kind=non_negative_float)
+    threshold: float = setting(0.1, "solved: tip within this distance [m] ...",
+                               kind=positive_float)
+    hold_steps: int = setting(10, "... for the last N steps", kind=positive_int)
+    squash: str = setting("sat", "policy squashing function", choices=("sat", "sin"))
+    policy_input_noise: str = setting(
+        "off", "'on': the policy sees a noisy measurement of the predicted state (variance "
+        "+ half the dynamics noise), as the release's propagate.m", choices=("on", "off"))
+    policy_init: str = setting(
+        "start", "initial RBF policy: 'start' draws its centers from the start distribution "
+        "as the MATLAB release does; 'random' from N(0, I)", choices=("start", "random"))
 
 
 def init_policy_from_start(controller, start_std: float, seed: int) -> None:
@@ -92,70 +75,56 @@ def init_policy_from_start(controller, start_std: float, seed: int) -> None:
     controller.models[0].kernel.lengthscales.assign([1.0, 1.0, 1.0, 0.7, 0.7])
 
 
-def agent_builder(args: argparse.Namespace):
-    """``(data, start_states) -> PILCO`` for the cart-pole with the settings in ``args``."""
-    from ..controllers import RbfController, squash_sat, squash_sin
-    from ..models import PILCO
-    from ..rewards import CartPoleReward
+class CartPoleTask(Task):
+    """The MATLAB release's cart-pole swing-up."""
 
-    def build(data, start_states):  # noqa: ARG001 - the start distribution is known
-        squash = squash_sat if args.squash == "sat" else squash_sin
-        controller = RbfController(5, 1, args.basis_functions, args.max_force, squash,
-                                   seed=args.seed)
-        if args.policy_init == "start":
-            init_policy_from_start(controller, args.start_std, args.seed)
-        return PILCO(data, controller, CartPoleReward(pendulum_length=0.5, width=args.cost_width),
-                     horizon=args.horizon, m_init=np.zeros((1, 4)),
-                     S_init=args.start_std ** 2 * np.eye(4), angle_indices=[3],
-                     policy_input_noise=args.policy_input_noise == "on")
+    name = "cartpole"
+    settings = CartPoleSettings
+    description = "PILCO cart-pole swing-up (MATLAB protocol)"
+    #: 8 episodes: the paper's Python/GPU port took 671 s in all (MATLAB: 1265 s).
+    paper_seconds = {"total": 671.0}
 
-    return build
+    def config(self, s: CartPoleSettings) -> ExperimentConfig:
+        from ..envs import CARTPOLE_ID
 
+        return self.loop_config(
+            s, env_id=CARTPOLE_ID,
+            env_kwargs=dict(max_force=s.max_force, cost_width=s.cost_width,
+                            start_std=s.start_std, noise_std=s.noise_std,
+                            max_episode_steps=s.horizon),
+            random_action_scale=None, cost_width=s.cost_width,
+            success_threshold=s.threshold, solved_rule="hold", hold_steps=s.hold_steps)
 
-def make_config(args: argparse.Namespace) -> ExperimentConfig:
-    """The run's settings from the parsed flags."""
-    from ..envs import CARTPOLE_ID
+    def agent_builder(self, s: CartPoleSettings, env):
+        """``(data, start_states) -> PILCO`` with an RBF policy on ``[x, dx, dθ, sin θ,
+        cos θ]`` and the saturating cost of the tip's distance to upright."""
+        from ..controllers import RbfController, squash_sat, squash_sin
+        from ..models import PILCO
+        from ..rewards import CartPoleReward
 
-    return ExperimentConfig(
-        task="cartpole", env_id=CARTPOLE_ID, seed=args.seed, episodes=args.episodes,
-        random_episodes=args.random_episodes, steps=args.horizon,
-        env_kwargs=dict(max_force=args.max_force, cost_width=args.cost_width,
-                        start_std=args.start_std, noise_std=args.noise_std,
-                        max_episode_steps=args.horizon),
-        random_action_scale=None, **learning_settings(args),
-        cost_width=args.cost_width, success_threshold=args.threshold, solved_rule="hold",
-        hold_steps=args.hold_steps, render=not args.no_render,
-        predictions=not args.no_figures, quiet=args.quiet,
-    )
+        def build(data, start_states):  # noqa: ARG001 - the start distribution is known
+            squash = squash_sat if s.squash == "sat" else squash_sin
+            controller = RbfController(5, 1, s.basis_functions, s.max_force, squash,
+                                       seed=s.seed)
+            if s.policy_init == "start":
+                init_policy_from_start(controller, s.start_std, s.seed)
+            return PILCO(data, controller,
+                         CartPoleReward(pendulum_length=0.5, width=s.cost_width),
+                         horizon=s.horizon, m_init=np.zeros((1, 4)),
+                         S_init=s.start_std ** 2 * np.eye(4), angle_indices=[3],
+                         policy_input_noise=s.policy_input_noise == "on")
 
+        return build
 
-def make_experiment(args: argparse.Namespace) -> Experiment:
-    """A new run in ``args.output``, or the one saved there with ``--resume``."""
-    return open_experiment(args, make_config(args), agent_builder(args))
+    def figures(self, exp: Experiment, s: CartPoleSettings) -> List[str]:
+        """Distances, predicted vs real cost, one- and multi-step predictions, the final
+        episode as a GIF."""
+        from .. import plotting
 
-
-def figures(exp: Experiment, args: argparse.Namespace) -> List[str]:
-    """Distances, predicted vs real cost, one- and multi-step predictions, the final
-    episode as a GIF; returns the written paths."""
-    from .. import plotting
-
-    return plotting.save_all(exp, exp.directory, title="cart-pole swing-up",
-                             state_dims=(0, 3), state_names=("x [m]", "θ [rad]"),
-                             distance_label="tip distance to target [m]",
-                             threshold=args.threshold)
-
-
-def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
-    """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    # runs saved before the late restarts became the default resume without them
-    return parse_task_args(build_parser(), argv, added_later=ADDED_LATER)
+        return plotting.save_all(exp, exp.directory, title="cart-pole swing-up",
+                                 state_dims=(0, 3), state_names=("x [m]", "θ [rad]"),
+                                 distance_label="tip distance to target [m]",
+                                 threshold=s.threshold)
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """Run the task as ``examples/cartpole.py`` does; returns the exit status."""
-    args = parse_args(argv)
-    exp = make_experiment(args)
-    summary = exp.run()
-    return finish(exp, summary, args, reference=PAPER_SECONDS,
-                  title=f"Timing (cartpole, seed {args.seed}, {len(summary['episodes'])} "
-                        f"episodes)", figures=lambda: figures(exp, args))
+CARTPOLE = CartPoleTask()

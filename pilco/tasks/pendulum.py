@@ -18,19 +18,18 @@ episode is up. The summary's ``cost`` is the saturating cost of |θ| with width
 """
 from __future__ import annotations
 
-import argparse
-from typing import List, Optional, Sequence
+from typing import List
 
 import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
-from ..experiment.cli import (add_common_arguments, finish, learning_settings,
-                              non_negative_float, open_experiment, parse_task_args,
-                              positive_float, positive_int)
 from ..experiment.scoring import solved_in_last_episode
+from .base import Task
+from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
+                       task_settings)
 
-__all__ = ["TARGET", "WEIGHTS", "M_INIT", "S_INIT", "build_parser", "agent_builder",
-           "make_config", "make_experiment", "figures", "parse_args", "main"]
+__all__ = ["TARGET", "WEIGHTS", "M_INIT", "S_INIT", "PendulumSettings", "PendulumTask",
+           "PENDULUM"]
 
 #: the reward's target (upright, at rest) and weights, on ``[cos θ, sin θ, θ̇]``
 TARGET = np.array([1.0, 0.0, 0.0])
@@ -40,93 +39,73 @@ M_INIT = np.array([[-1.0, 0.0, 0.0]])
 S_INIT = np.diag([0.01, 0.05, 0.01])
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Every flag of the pendulum task (common flags with the port's defaults)."""
-    parser = argparse.ArgumentParser(description="PILCO pendulum swing-up (Pendulum-v1)",
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    add_common_arguments(parser, episodes=12, random_episodes=4, steps=40,
-                         basis_functions=30, policy_iters=50, model_iters=50,
-                         policy_restarts=2, model_restarts=2,
-                         output="runs/pendulum-seed{seed}")
-    g = parser.add_argument_group("pendulum")
-    g.add_argument("--max-action", type=positive_float, default=2.0, help="torque bound [N m]")
-    g.add_argument("--substeps", type=positive_int, default=3,
-                   help="Pendulum-v1 steps (0.05 s) each action is held for")
-    g.add_argument("--start-std", type=non_negative_float, default=0.05,
-                   help="std of θ - π and θ̇ at the start (hanging down)")
-    g.add_argument("--noise-variance", type=non_negative_float, default=1e-3,
-                   help="the GPs' noise variance, fixed (0: learned)")
-    g.add_argument("--threshold", type=positive_float, default=0.3,
-                   help="up: |θ| below this [rad] ...")
-    g.add_argument("--hold-steps", type=positive_int, default=10, help="... for the last N steps")
-    return parser
+@task_settings(episodes=12, random_episodes=4, horizon=40, basis_functions=30,
+               policy_iters=50, model_iters=50, policy_restarts=2, model_restarts=2,
+               output="runs/pendulum-seed{seed}")
+class PendulumSettings(RunSettings):
+    """The pendulum's settings (the reference port's workload)."""
+
+    max_action: float = setting(2.0, "torque bound [N m]", kind=positive_float)
+    substeps: int = setting(3, "Pendulum-v1 steps (0.05 s) each action is held for",
+                            kind=positive_int)
+    start_std: float = setting(0.05, "std of θ - π and θ̇ at the start (hanging down)",
+                               kind=non_negative_float)
+    noise_variance: float = setting(1e-3, "the GPs' noise variance, fixed (0: learned)",
+                                    kind=non_negative_float)
+    threshold: float = setting(0.3, "up: |θ| below this [rad] ...", kind=positive_float)
+    hold_steps: int = setting(10, "... for the last N steps", kind=positive_int)
 
 
-def agent_builder(args: argparse.Namespace):
-    """``(data, start_states) -> PILCO`` for the pendulum with the settings in ``args``."""
-    import gpflow
+class PendulumTask(Task):
+    """The reference port's pendulum swing-up."""
 
-    from ..controllers import RbfController
-    from ..models import PILCO
-    from ..rewards import ExponentialReward
+    name = "pendulum"
+    settings = PendulumSettings
+    description = "PILCO pendulum swing-up (Pendulum-v1)"
 
-    def build(data, start_states):  # noqa: ARG001 - the start distribution is known
-        controller = RbfController(3, 1, args.basis_functions, max_action=args.max_action,
-                                   seed=args.seed)
-        agent = PILCO(data, controller, ExponentialReward(3, W=WEIGHTS, t=TARGET),
-                      horizon=args.horizon, m_init=M_INIT, S_init=S_INIT)
-        if args.noise_variance > 0:
-            for model in agent.mgpr.models:
-                model.likelihood.variance.assign(args.noise_variance)
-                gpflow.set_trainable(model.likelihood.variance, False)
-        return agent
+    def config(self, s: PendulumSettings) -> ExperimentConfig:
+        from ..envs import PENDULUM_ID
 
-    return build
+        return self.loop_config(
+            s, env_id=PENDULUM_ID,
+            env_kwargs=dict(substeps=s.substeps, start_std=s.start_std,
+                            max_episode_steps=s.horizon),
+            random_action_scale=s.max_action, cost_width=float(np.sqrt(0.5)),
+            success_threshold=s.threshold, solved_rule="hold", hold_steps=s.hold_steps)
 
+    def agent_builder(self, s: PendulumSettings, env):
+        """``(data, start_states) -> PILCO`` with the port's policy, reward and start."""
+        import gpflow
 
-def make_config(args: argparse.Namespace) -> ExperimentConfig:
-    """The run's settings from the parsed flags."""
-    from ..envs import PENDULUM_ID
+        from ..controllers import RbfController
+        from ..models import PILCO
+        from ..rewards import ExponentialReward
 
-    return ExperimentConfig(
-        task="pendulum", env_id=PENDULUM_ID, seed=args.seed, episodes=args.episodes,
-        random_episodes=args.random_episodes, steps=args.horizon,
-        env_kwargs=dict(substeps=args.substeps, start_std=args.start_std,
-                        max_episode_steps=args.horizon),
-        random_action_scale=args.max_action, **learning_settings(args),
-        cost_width=float(np.sqrt(0.5)), success_threshold=args.threshold,
-        solved_rule="hold", hold_steps=args.hold_steps, render=not args.no_render,
-        predictions=not args.no_figures, quiet=args.quiet,
-    )
+        def build(data, start_states):  # noqa: ARG001 - the start distribution is known
+            controller = RbfController(3, 1, s.basis_functions, max_action=s.max_action,
+                                       seed=s.seed)
+            agent = PILCO(data, controller, ExponentialReward(3, W=WEIGHTS, t=TARGET),
+                          horizon=s.horizon, m_init=M_INIT, S_init=S_INIT)
+            if s.noise_variance > 0:
+                for model in agent.mgpr.models:
+                    model.likelihood.variance.assign(s.noise_variance)
+                    gpflow.set_trainable(model.likelihood.variance, False)
+            return agent
 
+        return build
 
-def make_experiment(args: argparse.Namespace) -> Experiment:
-    """A new run in ``args.output``, or the one saved there with ``--resume``."""
-    config, build = make_config(args), agent_builder(args)
-    return open_experiment(args, config, build, success_fn=solved_in_last_episode(config))
+    def hooks(self, s: PendulumSettings, env):
+        return dict(success_fn=solved_in_last_episode(self.config(s)))
 
+    def figures(self, exp: Experiment, s: PendulumSettings) -> List[str]:
+        """|θ| per step, predicted vs real cost, one- and multi-step predictions, the
+        final episode as a GIF."""
+        from .. import plotting
 
-def figures(exp: Experiment, args: argparse.Namespace) -> List[str]:
-    """|θ| per step, predicted vs real cost, one- and multi-step predictions, the final
-    episode as a GIF; returns the written paths."""
-    from .. import plotting
-
-    return plotting.save_all(exp, exp.directory, title="pendulum swing-up",
-                             state_dims=(1, 2), state_names=("sin θ", "θ̇ [rad/s]"),
-                             distance_label="|θ| from upright [rad]",
-                             threshold=args.threshold)
+        return plotting.save_all(exp, exp.directory, title="pendulum swing-up",
+                                 state_dims=(1, 2), state_names=("sin θ", "θ̇ [rad/s]"),
+                                 distance_label="|θ| from upright [rad]",
+                                 threshold=s.threshold)
 
 
-def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
-    """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    return parse_task_args(build_parser(), argv)
-
-
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """Run the task (``python -m pilco.tasks pendulum``); returns the exit status."""
-    args = parse_args(argv)
-    exp = make_experiment(args)
-    summary = exp.run()
-    return finish(exp, summary, args,
-                  title=f"Timing (pendulum, seed {args.seed}, {len(summary['episodes'])} "
-                        f"episodes)", figures=lambda: figures(exp, args))
+PENDULUM = PendulumTask()

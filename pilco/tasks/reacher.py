@@ -64,7 +64,6 @@ process (MuJoCo's EGL renderer and TensorFlow cannot share a process).
 """
 from __future__ import annotations
 
-import argparse
 import logging
 from typing import Any, Dict, List, Optional, Sequence
 
@@ -72,16 +71,14 @@ import numpy as np
 
 from ..envs.fetch_damage import DAMAGE_MODES
 from ..experiment import Experiment, ExperimentConfig, make_env
-from ..experiment.cli import (add_common_arguments, add_preset_argument, finish,
-                              learning_settings, non_negative_float, open_experiment,
-                              parse_task_args, positive_float, positive_int)
+from .base import Task
+from .reacher_agent import after_model_fit, agent_builder, schedule, set_gp_priors
+from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
+                       task_settings)
 
-__all__ = ["build_parser", "env_kwargs", "make_config", "agent_builder",
-           "ignore_constant_inputs", "limit_bumps", "set_gp_priors", "make_experiment", "figures",
-           "reached_within", "parse_args", "main", "SUCCESS_STEPS", "position_weights",
-           "draw_target", "check_drawn_target",
-           "main_position_reward", "schedule", "init_policy_near", "ADDED_LATER",
-           "PAPER_CODE", "PAPER_CODE_DAMAGED"]
+__all__ = ["ReacherSettings", "DamagedReacherSettings", "ReacherTask", "REACHER",
+           "DAMAGED_REACHER", "env_kwargs", "reached_within", "SUCCESS_STEPS", "draw_target",
+           "check_drawn_target", "PAPER_CODE", "PAPER_CODE_DAMAGED"]
 
 
 #: Paper figures of the reacher (its own machine, with a GPU).
@@ -98,18 +95,6 @@ PAPER_CODE = dict(planning_horizon=100, start_var=0.1, cost_width=1.0, fine_cost
 #: stuck at its start angle, episodes of 25 steps, steps of up to 0.3 rad.
 PAPER_CODE_DAMAGED = dict(damage_mode="stuck", horizon=25, max_action=0.3)
 
-#: The paper code's priors on every dynamics GP's hyperparameters (GPflow 1's Gamma(shape,
-#: scale)): lengthscales ~ Gamma(1, 10), signal variance ~ Gamma(1.5, 2); training is then
-#: MAP instead of maximum evidence.
-PAPER_GP_PRIORS = {"lengthscales": (1.0, 10.0), "variance": (1.5, 2.0)}
-
-#: Settings added after runs were saved, with the value that reproduces such a run on
-#: ``--resume`` (they ran without the fine and joint-limit costs and the schedule, with
-#: policy centres from N(0, I)).
-ADDED_LATER = dict(fine_cost_width=0.0, limit_cost=0.0, early_cost_width=0.0,
-                   early_start_var=0.0, gp_priors="none", policy_init_var=0.0,
-                   target_spread=0.0)
-
 logger = logging.getLogger(__name__)
 
 #: mixed with the run's seed into the generator of :func:`draw_target`, so that the
@@ -120,97 +105,94 @@ TARGET_STREAM = 3
 SUCCESS_STEPS = 15
 
 
-def build_parser(damaged: bool = False) -> argparse.ArgumentParser:
-    """Every flag of the (damaged) reacher task. The damaged arm has the healthy arm's
-    defaults: with the paper's damage (the elbow stuck at its start angle) it starts in
-    the same pose and reaches with the other six joints."""
-    name = "damaged-reacher" if damaged else "reacher"
-    parser = argparse.ArgumentParser(
-        description=("PILCO on the Fetch joint-space reacher"
-                     + (" with a damaged joint" if damaged else "")),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    add_common_arguments(parser, episodes=4, steps=50, basis_functions=50, policy_iters=25,
-                         model_iters=100, policy_restarts=1, model_restarts=1, max_data=None,
-                         policy_min_rel_improvement=0.01, policy_patience=5,
-                         output=f"runs/{name}-seed{{seed}}")
-    presets = {"paper-code": dict(PAPER_CODE, **(PAPER_CODE_DAMAGED if damaged else {}))}
-    g = parser.add_argument_group("reacher")
-    g.add_argument("--cost-width", type=positive_float, default=0.2,
-                   help="σ_c [m] of the saturating cost on the gripper-target distance")
-    g.add_argument("--fine-cost-width", type=non_negative_float, default=0.05,
-                   help="add a second, narrow saturating cost of this width [m] (more "
-                        "precision near the target; 0: none)")
-    g.add_argument("--limit-cost", type=non_negative_float, default=0.1, metavar="WIDTH",
-                   help="penalise predicted joint angles near their limits: a saturating "
-                        "bump of this width [rad] at each limit of the limited joints "
-                        "(0: none)")
-    g.add_argument("--limit-cost-weight", type=non_negative_float, default=0.5,
-                   help="weight of each joint-limit bump against the position cost")
-    g.add_argument("--early-cost-width", type=non_negative_float, default=0.0,
-                   help="width [m] of the main cost in the first --early-episodes learned "
-                        "episodes (then --cost-width again; 0: no schedule)")
-    g.add_argument("--early-start-var", type=non_negative_float, default=0.1,
-                   help="variance of the initial state distribution in the first "
-                        "--early-episodes learned episodes (then --start-var; 0: no schedule)")
-    g.add_argument("--early-episodes", type=positive_int, default=1,
-                   help="learned episodes that use --early-cost-width / --early-start-var")
-    g.add_argument("--policy-init-var", type=non_negative_float, default=0.1,
-                   help="draw the initial policy's RBF centres from N(start observation, "
-                        "this·I), as the MATLAB release does (0: from N(0, I))")
-    g.add_argument("--gp-priors", choices=("none", "paper"), default="none",
-                   help="priors on the dynamics GPs' hyperparameters: 'paper' the paper "
-                        "code's Gamma priors on lengthscales and signal variance (MAP)")
-    g.add_argument("--planning-horizon", type=positive_int, default=None,
-                   help="steps the policy is optimised over (default: --horizon)")
-    g.add_argument("--start-var", type=positive_float, default=1e-4,
-                   help="variance of the initial state distribution (times the identity)")
-    g.add_argument("--random-action", type=positive_float, default=0.05,
-                   help="random episodes: actions uniform in ±this [rad]")
-    g.add_argument("--max-action", type=positive_float, default=0.1,
-                   help="policy and env bound of the per-step joint rotation [rad]")
-    g.add_argument("--threshold", type=non_negative_float, default=0.05,
-                   help="success distance [m]; episodes stop there")
-    g.add_argument("--no-early-stop", action="store_true",
-                   help="run every episode for the full horizon even at the target")
-    g.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
-                   help="target position [m] (default the env's (1.2, 0.38, 0.38))")
-    g.add_argument("--target-spread", type=non_negative_float, default=0.0, metavar="S",
-                   help="draw the target uniformly within ±S m per axis of --target (or of "
-                        "the default target) from the run's seed; 0: no draw")
-    g.add_argument("--start-noise", type=non_negative_float, default=0.0,
-                   help="std [rad] of noise on the start joint angles")
-    g.add_argument("--damage-mode", choices=DAMAGE_MODES, default="stuck",
-                   help="damaged arm: the joints ignore commands and stay at their start "
-                        "angle ('stuck', the paper's damage) or are forced to 0 rad "
-                        "('straight': the elbow straightened, a harder variant that needs "
-                        "at least 13 steps to the paper's target)")
-    g.add_argument("--joint-state", choices=("measured", "commanded"), default="measured",
-                   help="the state's joint angles: measured, or commanded (the running sum "
-                        "of the actions, as the paper's code)")
-    g.add_argument("--damaged-joints", nargs="+", default=["elbow_flex"],
-                   help="damaged arm: joints that ignore commands")
-    g.add_argument("--constant-input-lengthscale", type=non_negative_float, default=100.0,
-                   help="lengthscale given to GP inputs that are constant in the data (a "
-                        "damaged joint) after every model fit; 0: leave them to training")
-    g.add_argument("--render-size", type=positive_int, nargs=2, default=[320, 240],
-                   metavar=("W", "H"), help="frame size of the rendered final episode")
-    add_preset_argument(parser, presets)
-    return parser
+@task_settings(episodes=4, horizon=50, basis_functions=50, policy_iters=25, model_iters=100,
+               policy_min_rel_improvement=0.01, policy_patience=5,
+               output="runs/reacher-seed{seed}")
+class ReacherSettings(RunSettings):
+    """The reacher's settings (the damaged arm and the adaptation start from these)."""
+
+    cost_width: float = setting(0.2, "σ_c [m] of the saturating cost on the gripper-target "
+                                "distance", kind=positive_float)
+    fine_cost_width: float = setting(
+        0.05, "add a second, narrow saturating cost of this width [m] (more precision near "
+        "the target; 0: none)", kind=non_negative_float)
+    limit_cost: float = setting(
+        0.1, "penalise predicted joint angles near their limits: a saturating bump of this "
+        "width [rad] at each limit of the limited joints (0: none)", kind=non_negative_float,
+        metavar="WIDTH")
+    limit_cost_weight: float = setting(
+        0.5, "weight of each joint-limit bump against the position cost",
+        kind=non_negative_float)
+    early_cost_width: float = setting(
+        0.0, "width [m] of the main cost in the first --early-episodes learned episodes "
+        "(then --cost-width again; 0: no schedule)", kind=non_negative_float)
+    early_start_var: float = setting(
+        0.1, "variance of the initial state distribution in the first --early-episodes "
+        "learned episodes (then --start-var; 0: no schedule)", kind=non_negative_float)
+    early_episodes: int = setting(
+        1, "learned episodes that use --early-cost-width / --early-start-var",
+        kind=positive_int)
+    policy_init_var: float = setting(
+        0.1, "draw the initial policy's RBF centres from N(start observation, this·I), as "
+        "the MATLAB release does (0: from N(0, I))", kind=non_negative_float)
+    gp_priors: str = setting(
+        "none", "priors on the dynamics GPs' hyperparameters: 'paper' the paper code's Gamma "
+        "priors on lengthscales and signal variance (MAP)", choices=("none", "paper"))
+    planning_horizon: Optional[int] = setting(
+        None, "steps the policy is optimised over (default: --horizon)", kind=positive_int)
+    start_var: float = setting(1e-4, "variance of the initial state distribution (times the "
+                               "identity)", kind=positive_float)
+    random_action: float = setting(0.05, "random episodes: actions uniform in ±this [rad]",
+                                   kind=positive_float)
+    max_action: float = setting(0.1, "policy and env bound of the per-step joint rotation "
+                                "[rad]", kind=positive_float)
+    threshold: float = setting(0.05, "success distance [m]; episodes stop there",
+                               kind=non_negative_float)
+    no_early_stop: bool = setting(False, "run every episode for the full horizon even at the "
+                                  "target")
+    target: Optional[tuple] = setting(
+        None, "target position [m] (default the env's (1.2, 0.38, 0.38))", kind=float,
+        nargs=3, metavar=("X", "Y", "Z"))
+    target_spread: float = setting(
+        0.0, "draw the target uniformly within ±S m per axis of --target (or of the default "
+        "target) from the run's seed; 0: no draw", kind=non_negative_float, metavar="S")
+    start_noise: float = setting(0.0, "std [rad] of noise on the start joint angles",
+                                 kind=non_negative_float)
+    damage_mode: str = setting(
+        "stuck", "damaged arm: the joints ignore commands and stay at their start angle "
+        "('stuck', the paper's damage) or are forced to 0 rad ('straight': the elbow "
+        "straightened, a harder variant that needs at least 13 steps to the paper's "
+        "target)", choices=DAMAGE_MODES)
+    joint_state: str = setting(
+        "measured", "the state's joint angles: measured, or commanded (the running sum of "
+        "the actions, as the paper's code)", choices=("measured", "commanded"))
+    damaged_joints: tuple = setting(("elbow_flex",), "damaged arm: joints that ignore "
+                                    "commands", kind=str, nargs="+")
+    constant_input_lengthscale: float = setting(
+        100.0, "lengthscale given to GP inputs that are constant in the data (a damaged "
+        "joint) after every model fit; 0: leave them to training", kind=non_negative_float)
+    render_size: tuple = setting((320, 240), "frame size of the rendered final episode",
+                                 kind=positive_int, nargs=2, metavar=("W", "H"))
 
 
-def env_kwargs(args: argparse.Namespace, damaged: bool) -> Dict[str, Any]:
-    """Keyword arguments of ``FetchJointReacher`` for the parsed ``args``."""
-    kw = dict(max_action=args.max_action, distance_threshold=args.threshold,
-              joint_state=getattr(args, "joint_state", "measured"),
-              start_noise=args.start_noise, render_width=args.render_size[0],
-              render_height=args.render_size[1])
-    if args.target_spread > 0:
-        kw["target"] = tuple(draw_target(args.seed, args.target_spread, args.target))
-    elif args.target is not None:
-        kw["target"] = tuple(args.target)
+@task_settings(output="runs/damaged-reacher-seed{seed}")
+class DamagedReacherSettings(ReacherSettings):
+    """The damaged arm's settings: the healthy arm's defaults (with the paper's damage,
+    the elbow stuck at its start angle, it starts in the same pose)."""
+
+
+def env_kwargs(s: ReacherSettings, damaged: bool) -> Dict[str, Any]:
+    """Keyword arguments of ``FetchJointReacher`` for the settings ``s``."""
+    kw = dict(max_action=s.max_action, distance_threshold=s.threshold,
+              joint_state=s.joint_state, start_noise=s.start_noise,
+              render_width=s.render_size[0], render_height=s.render_size[1])
+    if s.target_spread > 0:
+        kw["target"] = tuple(draw_target(s.seed, s.target_spread, s.target))
+    elif s.target is not None:
+        kw["target"] = tuple(s.target)
     if damaged:
-        kw.update(damaged_joints=tuple(args.damaged_joints), damage_mode=args.damage_mode)
-    if args.no_early_stop:
+        kw.update(damaged_joints=tuple(s.damaged_joints), damage_mode=s.damage_mode)
+    if s.no_early_stop:
         kw["distance_threshold"] = 0.0  # the env never terminates; success still counted
     return kw
 
@@ -246,165 +228,6 @@ def check_drawn_target(env) -> None:
         logger.info("drawn target %s: reachable in %d steps at least", target, steps)
 
 
-def make_config(args: argparse.Namespace, task: str, damaged: bool) -> ExperimentConfig:
-    """The run's settings from the parsed flags."""
-    from ..envs import FETCH_DAMAGED_ID, FETCH_ID
-
-    return ExperimentConfig(
-        task=task, env_id=FETCH_DAMAGED_ID if damaged else FETCH_ID, seed=args.seed,
-        episodes=args.episodes, random_episodes=args.random_episodes, steps=args.horizon,
-        env_kwargs={**env_kwargs(args, damaged), "max_episode_steps": args.horizon},
-        random_action_scale=args.random_action, **learning_settings(args),
-        cost_width=args.cost_width, success_threshold=args.threshold, solved_rule="reach",
-        render=not args.no_render, predictions=not args.no_figures, quiet=args.quiet,
-    )
-
-
-def ignore_constant_inputs(agent, lengthscale: float = 100.0) -> None:
-    """Give the dynamics GPs a long lengthscale on GP-input columns that are constant in
-    the training data (a damaged joint held at one angle), so that the column is
-    irrelevant; called after building the agent and after every model fit."""
-    X = np.asarray(agent.mgpr.X)
-    constant = np.std(X, axis=0) < 1e-9
-    if not np.any(constant):
-        return
-    for model in agent.mgpr.models:
-        ell = np.array(model.kernel.lengthscales.numpy(), dtype=float)
-        ell[constant] = lengthscale
-        model.kernel.lengthscales.assign(ell)
-
-
-def agent_builder(args: argparse.Namespace, target: np.ndarray,
-                  joint_limits: Optional[np.ndarray] = None):
-    """``(data, start_states) -> PILCO`` for the reacher; ``target [3]`` is the gripper
-    target, the reward looks at state dims 0..2 (x, y, z); with ``--limit-cost`` also at
-    the joint angles (dims 3..9) near ``joint_limits [7, 2]`` (±inf: unlimited)."""
-    from ..controllers import RbfController, squash_sin
-    from ..models import PILCO
-    from ..rewards import CombinedRewards, ExponentialReward
-
-    def position_reward(D: int, width: float) -> ExponentialReward:
-        t = np.zeros((1, D))
-        t[0, :3] = target
-        return ExponentialReward(D, position_weights(D, width), t)
-
-    def build(data, start_states):
-        X, Y = data
-        D, U = Y.shape[1], X.shape[1] - Y.shape[1]
-        controller = RbfController(D, U, args.basis_functions, args.max_action, squash_sin,
-                                   seed=args.seed)
-        if getattr(args, "policy_init_var", 0.0):
-            init_policy_near(controller, start_states[0], args.policy_init_var, args.seed)
-        reward = position_reward(D, args.cost_width)
-        if args.fine_cost_width:
-            reward = CombinedRewards(D, [reward, position_reward(D, args.fine_cost_width)])
-        bumps = (limit_bumps(D, joint_limits, args.limit_cost)
-                 if getattr(args, "limit_cost", 0.0) and joint_limits is not None else None)
-        if bumps is not None:
-            reward = CombinedRewards(D, [reward, bumps], [1.0, -args.limit_cost_weight])
-        agent = PILCO(data, controller, reward, horizon=args.planning_horizon or args.horizon,
-                      m_init=start_states[0:1], S_init=args.start_var * np.eye(D))
-        set_gp_priors(agent, args)
-        after_model_fit(args)(agent)
-        return agent
-
-    return build
-
-
-def init_policy_near(controller, x0: np.ndarray, var: float, seed: int) -> None:
-    """The MATLAB release's initial policy, around ``x0 [D]``: RBF centres drawn from
-    N(x0, var·I), targets from N(0, 0.1²) (lengthscales stay 1); see
-    :meth:`pilco.controllers.RbfController.place_near`."""
-    controller.place_near(x0, np.sqrt(var), seed=seed)
-
-
-def limit_bumps(state_dim: int, joint_limits: np.ndarray, width: float):
-    """An :class:`~pilco.rewards.AxisBumpsReward` with one bump of ``width`` [rad] per
-    finite joint limit, centred on the limit of joint ``j`` (state dim ``3 + j``), highest
-    (1) at the limit; ``None`` when no joint is limited. Subtracted from the reward, the
-    bumps keep the predicted joint angles away from the limits, where the real joint
-    stops but the GP model, which rarely sees a joint at its limit, predicts it moving
-    on."""
-    from ..rewards import AxisBumpsReward
-
-    limits = np.asarray(joint_limits, dtype=np.float64)
-    dims, centres = [], []
-    for j, bounds in enumerate(limits):
-        for value in bounds:
-            if np.isfinite(value):
-                dims.append(3 + j)
-                centres.append(value)
-    if not dims:
-        return None
-    return AxisBumpsReward(state_dim, dims, centres, np.full(len(dims), float(width)))
-
-
-def set_gp_priors(agent, args: argparse.Namespace) -> None:
-    """With ``--gp-priors paper``, put :data:`PAPER_GP_PRIORS` on every output GP of
-    ``agent.mgpr`` (before its first training: the compiled training loss includes the
-    priors it saw when it was traced). Called on new and on resumed agents, since
-    ``agent.npz`` keeps hyperparameter values, not priors."""
-    if getattr(args, "gp_priors", "none") != "paper":
-        return
-    import tensorflow as tf
-    import tensorflow_probability as tfp
-
-    for model in agent.mgpr.models:
-        for name, (shape, scale) in PAPER_GP_PRIORS.items():
-            getattr(model.kernel, name).prior = tfp.distributions.Gamma(
-                tf.constant(shape, tf.float64), tf.constant(1.0 / scale, tf.float64))
-
-
-def position_weights(state_dim: int, width: float) -> np.ndarray:
-    """``W [D, D]`` of a saturating cost of ``width`` [m] on the gripper position (state
-    dims 0..2)."""
-    W = np.zeros((state_dim, state_dim))
-    W[:3, :3] = np.eye(3) / width ** 2
-    return W
-
-
-def main_position_reward(reward):
-    """The reacher's main position cost inside its (possibly nested) combined reward:
-    the first component, all the way down."""
-    while hasattr(reward, "base_rewards"):
-        reward = reward.base_rewards[0]
-    return reward
-
-
-def schedule(args: argparse.Namespace):
-    """``(agent, episode number) -> None`` run before every policy search: in the first
-    ``--early-episodes`` learned episodes the main cost has width ``--early-cost-width``
-    and the initial state variance is ``--early-start-var`` (when set), afterwards the
-    flags' ``--cost-width`` and ``--start-var``. Works on a resumed agent too: it sets
-    both every time."""
-    early_width = getattr(args, "early_cost_width", 0.0)
-    early_var = getattr(args, "early_start_var", 0.0)
-
-    def before_policy_search(agent, number: int) -> None:
-        early = number - args.random_episodes <= args.early_episodes
-        if early_width:
-            width = early_width if early else args.cost_width
-            main_position_reward(agent.reward).W.assign(
-                position_weights(agent.state_dim, width))
-        if early_var:
-            D = agent.state_dim
-            agent.S_init = (early_var if early else args.start_var) * np.eye(D)
-
-    return before_policy_search
-
-
-def after_model_fit(args: argparse.Namespace):
-    """``agent -> None`` run after building the agent and every model fit:
-    :func:`ignore_constant_inputs` unless ``--constant-input-lengthscale 0``."""
-    ell = args.constant_input_lengthscale
-
-    def adjust(agent) -> None:
-        if ell:
-            ignore_constant_inputs(agent, ell)
-
-    return adjust
-
-
 def reached_within(steps: int):
     """``summary -> bool``: the last episode reached the target within ``steps`` steps."""
 
@@ -417,57 +240,76 @@ def reached_within(steps: int):
     return success
 
 
-def make_experiment(args: argparse.Namespace, task: str = "reacher",
-                    damaged: bool = False, success_fn=None, wrap_env=None) -> Experiment:
-    """A new run in ``args.output``, or the one saved there with ``--resume``;
-    ``wrap_env(env) -> env`` wraps the env (e.g. to add an observation)."""
-    from .. import plotting
+class ReacherTask(Task):
+    """The Fetch joint-space reacher (``damaged``: with the paper's damaged arm)."""
 
-    config = make_config(args, task, damaged)
-    # the reward needs the target: the env is made here and handed to the experiment
-    env = make_env(config.env_id, config.env_kwargs, render=False)
-    if wrap_env is not None:
-        env = wrap_env(env)
-    target = env.unwrapped.target
-    if args.target_spread > 0:
-        check_drawn_target(env)
+    name = "reacher"
+    settings = ReacherSettings
+    description = "PILCO on the Fetch joint-space reacher"
+    presets = {"paper-code": PAPER_CODE}
+    paper_seconds = PAPER_SECONDS
+    damaged = False
+    replays_frames = True
 
-    def render(episode):
-        return plotting.replay_fetch_frames(episode.states[:, 3:10], target,
-                                            *args.render_size)
+    def config(self, s: ReacherSettings) -> ExperimentConfig:
+        from ..envs import FETCH_DAMAGED_ID, FETCH_ID
 
-    build = agent_builder(args, target, env.unwrapped.joint_limits)
-    exp = open_experiment(args, config, build, make_env=lambda: env,
-                          render_fn=render, after_model_fit=after_model_fit(args),
-                          before_policy_search=schedule(args),
-                          success_fn=success_fn or reached_within(SUCCESS_STEPS))
-    if exp.agent is not None:  # resumed from agent.npz, which holds no priors
-        set_gp_priors(exp.agent, args)
-    return exp
+        return self.loop_config(
+            s, env_id=FETCH_DAMAGED_ID if self.damaged else FETCH_ID,
+            env_kwargs={**env_kwargs(s, self.damaged), "max_episode_steps": s.horizon},
+            random_action_scale=s.random_action, cost_width=s.cost_width,
+            success_threshold=s.threshold, solved_rule="reach")
+
+    def make_env(self, s: ReacherSettings, config: ExperimentConfig):
+        """The arm (the reward needs its target, so it is made before the agent); a drawn
+        target is logged with the fewest steps that reach it."""
+        env = make_env(config.env_id, config.env_kwargs, render=False)
+        if s.target_spread > 0:
+            check_drawn_target(env)
+        return env
+
+    def render_fn(self, s: ReacherSettings, env):
+        """The final episode's frames, replayed from its joint angles in another process
+        (MuJoCo's EGL renderer and TensorFlow cannot share a process)."""
+        from .. import plotting
+
+        def render(episode):  # the target of the episode just run
+            return plotting.replay_fetch_frames(episode.states[:, 3:10],
+                                                env.unwrapped.target, *s.render_size)
+
+        return render
+
+    def agent_builder(self, s: ReacherSettings, env):
+        return agent_builder(s, env.unwrapped.target, env.unwrapped.joint_limits)
+
+    def hooks(self, s: ReacherSettings, env) -> Dict[str, Any]:
+        return dict(after_model_fit=after_model_fit(s), before_policy_search=schedule(s),
+                    success_fn=reached_within(SUCCESS_STEPS))
+
+    def prepare(self, exp: Experiment, s: ReacherSettings) -> None:
+        if exp.agent is not None:  # resumed from agent.npz, which holds no priors
+            set_gp_priors(exp.agent, s)
+
+    def figures(self, exp: Experiment, s: ReacherSettings) -> List[str]:
+        """Distances, predicted vs real cost, one- and multi-step predictions, the final
+        episode as a GIF."""
+        from .. import plotting
+
+        return plotting.save_all(exp, exp.directory, title=self.name.replace("_", " "),
+                                 state_dims=(0, 1, 2), state_names=("x", "y", "z"),
+                                 distance_label="distance to target [m]",
+                                 threshold=exp.config.success_threshold)
 
 
-def figures(exp: Experiment, title: str) -> List[str]:
-    """Distances, predicted vs real cost, one- and multi-step predictions, the final
-    episode as a GIF; returns the written paths."""
-    from .. import plotting
+class DamagedReacherTask(ReacherTask):
+    """The reacher on the paper's damaged arm: the elbow ignores every command."""
 
-    return plotting.save_all(exp, exp.directory, title=title, state_dims=(0, 1, 2),
-                             state_names=("x", "y", "z"), distance_label="distance to target [m]",
-                             threshold=exp.config.success_threshold)
-
-
-def parse_args(argv: Optional[Sequence[str]] = None,
-               damaged: bool = False) -> argparse.Namespace:
-    """The parsed flags (``--resume`` restores the saved ones); sets up logging."""
-    return parse_task_args(build_parser(damaged), argv, ADDED_LATER)
+    name = "damaged_reacher"
+    settings = DamagedReacherSettings
+    description = "PILCO on the Fetch joint-space reacher with a damaged joint"
+    presets = {"paper-code": dict(PAPER_CODE, **PAPER_CODE_DAMAGED)}
+    damaged = True
 
 
-def main(argv: Optional[Sequence[str]] = None, damaged: bool = False) -> int:
-    """Run the task as ``examples/reacher.py`` does; returns the exit status."""
-    task = "damaged_reacher" if damaged else "reacher"
-    args = parse_args(argv, damaged)
-    exp = make_experiment(args, task, damaged)
-    summary = exp.run()
-    return finish(exp, summary, args, title=f"Timing ({task}, seed {args.seed})",
-                  reference=PAPER_SECONDS,
-                  figures=lambda: figures(exp, task.replace("_", " ")))
+REACHER = ReacherTask()
+DAMAGED_REACHER = DamagedReacherTask()

@@ -3,8 +3,10 @@ data of the episodes before it) and its policy (the one that ran it).
 
 The run saves its agent after adding an episode's data and before fitting the next model,
 so for the last episode ``agent.npz`` with its data cut back is exact; an earlier episode's
-agent is rebuilt by replaying the run's learning with its own settings and seeds. Either way
-the policy is checked against the actions the episode recorded (:func:`action_error`).
+agent is rebuilt by replaying the run's learning with its own settings and seeds (the
+experiment's own model and policy phases, :mod:`pilco.experiment.learning`, and the task's
+:attr:`~pilco.experiment.Experiment.before_replayed_episode` hook). Either way the policy
+is checked against the actions the episode recorded (:func:`action_error`).
 """
 from __future__ import annotations
 
@@ -14,8 +16,8 @@ import time
 
 import numpy as np
 
-from .episode import Episode
-from .learning import learn_policy, train_model
+from ..experiment.episode import Episode
+from ..experiment.learning import learn_policy, train_model
 
 __all__ = ["view_before", "action_error", "replay_learning", "agent_of_episode"]
 

@@ -1,138 +1,53 @@
-"""Measurements of a learned episode for :mod:`pilco.experiment.diagnose`: the task
-distance a saturating cost measures, the model's one-step and multi-step predictions
-against the real episode, the objective's slope at the start, and the policy objective of
-re-optimised policies on the same model."""
+"""The measurements of a learned episode: what the diagnosis knows before it judges.
+
+Model
+    - one step (:func:`one_step_check`): the predicted state change ``x_{t+1} - x_t`` at
+      every real transition of the episode against the real one, standardised per state
+      dimension (``z = (Δ - mean) / std``, the noise variance included). *Coverage* is the
+      fraction of ``|z| <= 2`` (0.95 for a calibrated Gaussian), over all dimensions and
+      over those the cost reads.
+    - open loop (:func:`open_loop_check`): the episode's own actions applied to the
+      model's mean from the real start; the error is the distance between the model's and
+      the real point the cost measures (the gripper), per step.
+    - multi-step (:func:`multi_step_check`): the task distance predicted from the start
+      distribution under the episode's policy (mean and std per step, from samples of the
+      moment-matched state Gaussians) against the real distance trace, and the predicted
+      against the real cost per step.
+Optimiser
+    (:func:`optimiser_check`) the policy objective of the same model (the predicted cost
+    summed over the planning horizon: what the policy optimiser minimises) of the run's
+    policy, against ``restarts`` policy optimisations started from
+    ``controller.randomize`` and one that continues from the run's policy, each with the
+    run's settings for the episode (iterations, method, early stop). Each candidate policy
+    is also run on the real system from the episode's start when an environment is given.
+Objective
+    (:func:`objective_check`) the slope of the saturating cost ``1 - exp(-d² / 2σ_c²)`` at
+    the start distance d0, relative to its maximum (at d = σ_c):
+    ``(d0/σ_c) exp((1 - d0²/σ_c²) / 2)``.
+
+Every check takes the agent as it was when the episode ran (:mod:`pilco.diagnose.replay`)
+and returns a JSON-ready dict; the distances are those of the cost's geometry
+(:mod:`pilco.diagnose.geometry`).
+"""
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from ..experiment.episode import Episode, rollout
+from ..experiment.learning import improve_policy
+from ..experiment.scoring import episode_solved
 from ..snapshots import restore, snapshot
-from .episode import Episode, rollout
-from .learning import improve_policy
+from .geometry import CostGeometry, distance_moments, slope_ratio
+from .thresholds import Thresholds
 
-__all__ = ["Thresholds", "slope_ratio", "CostGeometry", "cost_geometry", "distance_moments",
-           "one_step_check", "mean_dynamics", "open_loop_check", "predicted_run",
+__all__ = ["one_step_check", "mean_dynamics", "open_loop_check", "predicted_run",
            "multi_step_check", "objective_check", "optimiser_check"]
 
 logger = logging.getLogger(__name__)
-
-
-def slope_ratio(widths: float) -> float:
-    """Slope of ``1 - exp(-d² / 2σ²)`` at ``d = widths · σ`` over its maximum (at d = σ)."""
-    r = float(widths)
-    return r * float(np.exp((1.0 - r * r) / 2.0))
-
-
-@dataclasses.dataclass(frozen=True)
-class Thresholds:
-    """The numbers of the verdict rules (see the module docstring)."""
-
-    #: a real value is "within the prediction" if within this many predicted std
-    z: float = 2.0
-    #: the model is wrong one step ahead if fewer one-step errors than this fraction are
-    #: within ``z`` std (0.95 for a calibrated Gaussian) ...
-    coverage: float = 0.90
-    #: ... or fewer than this fraction in some state dimension (one mispredicted dimension,
-    #: e.g. a joint held at its limit, is diluted in the overall fraction)
-    coverage_dim: float = 0.70
-    #: a candidate is clearly better if it lowers the predicted cost by at least
-    #: ``max(gain_abs, gain_rel * run's predicted cost)``
-    gain_abs: float = 1.0
-    gain_rel: float = 0.10
-    #: the cost is flat at start distances beyond this many cost widths
-    flat_widths: float = 3.0
-
-    def gain_needed(self, run_cost: float) -> float:
-        """The predicted-cost decrease that counts as clearly better than ``run_cost``
-        (also the clear margin of a real cost above its prediction)."""
-        return max(self.gain_abs, self.gain_rel * abs(float(run_cost)))
-
-    def one_step_wrong(self, coverage: float, worst_dim_coverage: float) -> bool:
-        """Whether one-step coverages say the model is wrong along the real episode."""
-        return coverage < self.coverage or worst_dim_coverage < self.coverage_dim
-
-
-# -- the cost's geometry --------------------------------------------------------------------
-@dataclasses.dataclass
-class CostGeometry:
-    """Where a saturating reward puts the target, in task units.
-
-    ``offset(states [N, D]) -> [N, k]``: the vector from the target to the point the
-    reward measures (the gripper, the pendulum tip), in the state's units when the reward's
-    weight matrix is isotropic on the dimensions it reads (``width`` is then σ_c in those
-    units), else in cost widths (``width`` 1); :meth:`distance` is its length. ``dims``: the
-    state dimensions the reward reads; ``max_reward``: the reward at the target (cost =
-    max_reward - reward).
-    """
-
-    width: float
-    dims: Tuple[int, ...]
-    offset: Callable[[np.ndarray], np.ndarray]
-    max_reward: float = 1.0
-
-    def distance(self, X) -> np.ndarray:
-        """Task distance of states [N, D] -> [N]."""
-        return np.linalg.norm(self.offset(X), axis=1)
-
-
-def cost_geometry(reward) -> Optional[CostGeometry]:
-    """The :class:`CostGeometry` of ``ExponentialReward``, ``CartPoleReward`` and
-    ``CombinedRewards`` of them (the widest positively weighted part's; parts with a
-    negative weight are penalties and left out); None for other rewards."""
-    from ..rewards import CartPoleReward, CombinedRewards, ExponentialReward
-
-    if isinstance(reward, ExponentialReward):
-        W, t = np.asarray(reward.W.numpy()), np.asarray(reward.t.numpy())[0]
-        lam, V = np.linalg.eigh(0.5 * (W + W.T))
-        keep = lam > 1e-12 * max(lam.max(), 1e-300)
-        iso = keep.any() and np.allclose(lam[keep], lam[keep][0], rtol=1e-6)
-        width = float(1.0 / np.sqrt(lam[keep][0])) if iso else 1.0
-        L = V[:, keep] * np.sqrt(lam[keep])  # W = L L^T on its range
-
-        def offset(X):
-            return width * (np.asarray(X, dtype=np.float64) - t) @ L
-
-        dims = tuple(int(i) for i in np.nonzero(np.any(W != 0, axis=1))[0])
-        return CostGeometry(width, dims, offset)
-    if isinstance(reward, CartPoleReward):
-        length = float(reward.pendulum_length)
-
-        def tip_offset(X):
-            X = np.asarray(X, dtype=np.float64)
-            # the tip at (x + l sin θ, -l cos θ), the target at (0, l)
-            return np.stack([X[:, 0] + length * np.sin(X[:, 3]),
-                             -length * (np.cos(X[:, 3]) + 1.0)], axis=1)
-
-        return CostGeometry(float(reward.width), (0, 3), tip_offset)
-    if isinstance(reward, CombinedRewards):
-        # parts with a negative weight are penalties (e.g. joint-limit bumps), ~0 at the
-        # target: the geometry and the best reward are those of the positive parts
-        coefs = np.asarray(reward.coefs.numpy(), dtype=np.float64)
-        parts = [(c, cost_geometry(r)) for c, r in zip(coefs, reward.base_rewards) if c > 0]
-        if not parts or any(p is None for _, p in parts):
-            return None
-        widest = max((p for _, p in parts), key=lambda p: p.width)
-        return dataclasses.replace(
-            widest, max_reward=float(sum(c * p.max_reward for c, p in parts)))
-    return None
-
-
-def distance_moments(geometry: CostGeometry, M: np.ndarray, S: np.ndarray,
-                     samples: int = 4000, seed: int = 0) -> Tuple[np.ndarray, np.ndarray]:
-    """Mean and std [T] of the task distance under the Gaussians ``N(M[t], S[t])``
-    (M [T, D], S [T, D, D]), from ``samples`` draws (the same normal draws at every step)."""
-    z = np.random.default_rng(seed).standard_normal((samples, M.shape[1]))
-    mean, std = np.empty(len(M)), np.empty(len(M))
-    for i, (m, s) in enumerate(zip(M, S)):
-        w, V = np.linalg.eigh(0.5 * (s + s.T))
-        d = geometry.distance(m + (z * np.sqrt(np.clip(w, 0.0, None))) @ V.T)
-        mean[i], std[i] = d.mean(), d.std()
-    return mean, std
 
 
 def _cost_of_states(agent, geometry: CostGeometry, states: np.ndarray) -> np.ndarray:
@@ -227,8 +142,6 @@ def predicted_run(agent, steps: int, geometry: Optional[CostGeometry]) -> Dict[s
 def multi_step_check(exp, agent, episode: Episode, geometry: Optional[CostGeometry],
                      thresholds: Thresholds) -> Dict[str, Any]:
     """Predicted distance and cost per step against the real episode's."""
-    from .scoring import episode_solved
-
     steps = exp.config.steps
     pred = predicted_run(agent, steps, geometry)
     real_d = np.asarray(episode.distances, dtype=np.float64)

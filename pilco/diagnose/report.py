@@ -1,0 +1,88 @@
+"""The diagnosis as text: the report ``python -m pilco.diagnose`` prints, from the result
+of :func:`pilco.diagnose.diagnose` (the same dict as ``diagnosis.json``)."""
+from __future__ import annotations
+
+from typing import Any, Dict
+
+__all__ = ["format_report"]
+
+
+def _f(value, fmt: str = ".3f") -> str:
+    """``value`` formatted with ``fmt``, or "-" when it was not measured (None)."""
+    return "-" if value is None else format(value, fmt)
+
+
+def format_report(result: Dict[str, Any], every: int = 5) -> str:
+    """The diagnosis as text: model, optimiser, objective, verdict and notes, with the
+    predicted and real distance and cost every ``every`` steps."""
+    one, multi = result["model"]["one_step"], result["model"]["multi_step"]
+    opt, obj, v = result["optimiser"], result["objective"], result["verdict"]
+    lines = [f"Diagnosis of episode {result['episode']} of {result['episodes']} "
+             f"({result['task']}, seed {result['seed']}): {result['directory']}", "",
+             "Model, one step along the real episode (errors within ±2 predicted std):"]
+    cov_dims = one["coverage_per_dim"]
+    lines.append(f"  all dims {one['coverage']:.0%}"
+                 + (f", cost dims {one['cost_dims']} {one['coverage_cost_dims']:.0%}"
+                    if one["cost_dims"] else "")
+                 + "; per dim " + " ".join(f"{c:.0%}" for c in cov_dims))
+    lines.append("  rms z per dim " + " ".join(f"{z:.2f}" for z in one["rms_z_per_dim"]))
+    k = one["worst_dim"]
+    lines.append(f"  worst dim {k}: first outside ±2 std at step "
+                 f"{one['first_outside_per_dim'][k]}; model wrong one step ahead: "
+                 f"{'yes' if one['wrong'] else 'no'}")
+    loop = result["model"]["open_loop"]
+    if loop.get("error") is not None:
+        lines += ["", "Model, open loop (the episode's actions on the model's mean from the real "
+                      "start):",
+                  f"  off by {loop['error_at_closest']:.3f} at the real closest approach (step "
+                  f"{loop['closest_step']}; success distance {loop['threshold']:g}), "
+                  f"{loop['max_error']:.3f} at most; model distance at the end "
+                  f"{loop['distance'][-1]:.3f}; model wrong there: "
+                  f"{'yes' if loop['wrong'] else 'no'}"]
+    if "pred_distance_mean" in multi:
+        lines += ["", "Model, multi-step from the start distribution under the episode's policy:",
+                  f"  {'step':>4} {'pred d':>8} {'± std':>7} {'real d':>8} {'open-loop d':>12} "
+                  f"{'pred cost':>10} {'real cost':>10}"]
+        open_d = loop.get("distance")
+        pm, ps, rd = multi["pred_distance_mean"], multi["pred_distance_std"], multi["real_distance"]
+        pc, rc = multi["pred_cost"], multi["real_cost"]
+        for t in sorted(set(range(0, len(pm), every)) | {len(pm) - 1}):
+            real = t < len(rd)
+            lines.append(f"  {t:>4} {pm[t]:>8.3f} {ps[t]:>7.3f} "
+                         f"{_f(rd[t] if real else None):>8} "
+                         f"{_f(open_d[t] if real and open_d is not None else None):>12} "
+                         f"{pc[t]:>10.3f} {_f(rc[t] if real else None):>10}")
+        lines.append(f"  final distance: predicted {multi['pred_final_distance']:.3f} ± "
+                     f"{multi['pred_final_std']:.3f}, real {multi['real_final_distance']:.3f} "
+                     f"({'inside' if multi['final_inside'] else 'outside'} ±2 std); closest: "
+                     f"predicted {multi['pred_min_distance']:.3f}, real "
+                     f"{multi['real_min_distance']:.3f}; predicted to solve: "
+                     f"{'yes' if multi['pred_solved'] else 'no'}")
+        lines.append(f"  cost over the episode's steps: predicted {multi['pred_cost_sum']:.2f}, "
+                     f"real {multi['real_cost_sum']:.2f} (real - predicted "
+                     f"{multi['optimism']:.2f})")
+    lines += ["", f"Optimiser: the policy objective (predicted cost over {opt['horizon']} "
+                  f"steps) of the same model, {opt['iterations']} iterations of "
+                  f"{opt['method']} per candidate:",
+              f"  {'#':>2} {'start':<10}{'seed':>11} {'pred cost':>10} {'pred final':>11} "
+              f"{'pred min':>9} {'real final':>11} {'real min':>9} {'solves':>7} {'s':>6}"]
+    for i, c in enumerate(opt["candidates"]):
+        solves = c.get("real_solved")
+        lines.append(f"  {i:>2} {c['start']:<10}{_f(c['seed'], 'd'):>11} {c['pred_cost']:>10.3f} "
+                     f"{_f(c.get('pred_final_distance')):>11} {_f(c.get('pred_min_distance')):>9} "
+                     f"{_f(c.get('real_final_distance')):>11} {_f(c.get('real_min_distance')):>9} "
+                     f"{'-' if solves is None else 'yes' if solves else 'no':>7} "
+                     f"{c['seconds']:>6.1f}")
+    if opt["gain"] is not None:
+        lines.append(f"  best candidate #{opt['best']}: {opt['gain']:.2f} lower than the run's "
+                     f"(clearly better from {opt['gain_needed']:.2f})")
+    if obj["start_widths"] is not None:
+        lines += ["", f"Objective: start distance {obj['start_distance']:.3f} = "
+                      f"{obj['start_widths']:.2f} cost widths (σ_c {obj['cost_width']:g}); the "
+                      f"cost's slope there is {obj['slope_ratio']:.0%} of its maximum (flat "
+                      f"below {obj['flat_slope_ratio']:.1%})"]
+    lines += ["", f"Verdict: {v['label']} (rule {v['rule']}): {v['reason']}"]
+    if v.get("caveat"):
+        lines.append(f"  caveat: {v['caveat']}")
+    lines += [f"  - {n}" for n in result["notes"]]
+    return "\n".join(lines)

@@ -1,0 +1,89 @@
+"""Start distributions of the policy objective: one per task.
+
+A single-task agent has one start ``N(m_init [1, D], S_init [D, D])``. A multi-task agent
+(Deisenroth et al., "Multi-task policy search for robotics", ICRA 2014) has T of them,
+``m_init [T, D]`` with its task's context (e.g. the target) in the context dimensions of
+each row, and either one covariance ``S_init [D, D]`` shared by all tasks or one per task
+``S_init [T, D, D]``; the policy objective sums the expected returns of all T.
+"""
+from __future__ import annotations
+
+from typing import Tuple
+
+import numpy as np
+
+from ..validation import check_covariance, check_gaussian
+
+__all__ = ["check_starts", "check_task"]
+
+
+def _numpy(x):
+    """``x`` as an array if it is array-like (tensors included), else ``x`` unchanged (the
+    checks below then report its type)."""
+    if callable(getattr(x, "numpy", None)):
+        return x.numpy()
+    if isinstance(x, (str, bytes)) or x is None:
+        return x
+    try:
+        return np.asarray(x)
+    except (TypeError, ValueError):  # ragged lists: the checks below say so
+        return x
+
+
+def check_starts(m_init, S_init, state_dim: int,
+                 name: str = "initial state") -> Tuple[np.ndarray, np.ndarray, bool]:
+    """Check T start distributions; return them as float64 arrays.
+
+    Shapes: ``m_init`` [D], [1, D] (one task) or [T, D] (one start per row);
+    ``S_init`` [D, D] (shared by all tasks) or [T, D, D] (one per task) ->
+    m [T, D], S [T, D, D], shared (True when one covariance serves every task).
+
+    One task is checked exactly as :func:`pilco.validation.check_gaussian` checks a
+    state (the same messages); with several, each message names the task.
+    """
+    D = state_dim
+    m = _numpy(m_init)
+    s = _numpy(S_init)
+    s_rank = getattr(s, "ndim", None)
+    m_rank = getattr(m, "ndim", None)
+    if m_rank is not None and m_rank > 2:
+        raise ValueError(f"{name} mean must have shape (T, {D}) (one start per task), got "
+                         f"{m.shape}")
+    rows = m.shape[0] if m_rank == 2 else 1
+    if rows <= 1:
+        if s_rank == 3 and s.shape[0] == 1:
+            s = s[0]
+        elif s_rank == 3:
+            raise ValueError(f"{name} covariance holds {s.shape[0]} covariances "
+                             f"(shape {s.shape}) but the mean has one start")
+        m_t, s_t = check_gaussian(m, s, D, name)
+        return m_t.numpy().reshape(1, D), s_t.numpy().reshape(1, D, D), True
+    if m.shape[1] != D:
+        raise ValueError(f"{name} mean must have shape (T, {D}) (one start per task), got "
+                         f"{m.shape}")
+    T = rows
+    shared = s_rank != 3
+    if shared:
+        s = check_covariance(s, D, f"{name} covariance")
+        covariances = [s] * T
+    else:
+        if s.shape[0] != T:
+            raise ValueError(f"{name} covariance must have shape ({D}, {D}) (shared by all "
+                             f"tasks) or ({T}, {D}, {D}) (one per task), got {s.shape}")
+        covariances = list(s)
+    means, covs = [], []
+    for i in range(T):
+        m_t, s_t = check_gaussian(m[i], covariances[i], D, f"task {i}'s {name}")
+        means.append(m_t.numpy().reshape(D))
+        covs.append(s_t.numpy())
+    return np.stack(means), np.stack(covs), shared
+
+
+def check_task(task, num_tasks: int) -> int:
+    """A task index in ``range(num_tasks)``, or a clear error."""
+    if isinstance(task, (bool, np.bool_)) or not isinstance(task, (int, np.integer)):
+        raise TypeError(f"task must be an integer index, got {task!r}")
+    if not 0 <= task < num_tasks:
+        raise ValueError(f"task {int(task)} does not exist: the agent has {num_tasks} "
+                         f"start distribution(s), tasks 0 to {num_tasks - 1}")
+    return int(task)

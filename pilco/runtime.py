@@ -1,0 +1,259 @@
+"""Start-up of pilco's command-line entry points: TensorFlow's log lines, logging, threads.
+
+Every command (``pilco``, ``python -m pilco.tasks``, ``python -m pilco.sweep``,
+``python -m pilco.diagnose``) calls :func:`quiet_tensorflow` before anything imports
+TensorFlow, sets up logging with :func:`configure_logging` and the thread pools with
+:func:`configure_threads` (a process of its own) or :func:`thread_environment` (the
+environment of a process it starts).
+
+Nothing here imports TensorFlow at import time.
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib.abc
+import logging
+import os
+import re
+import sys
+import tempfile
+from typing import Dict, Iterator, List, Mapping, Optional, Union
+
+__all__ = ["TF_LOG_LEVEL", "THREAD_VARIABLES", "quiet_tensorflow", "log_level",
+           "configure_logging", "configure_threads", "thread_environment"]
+
+#: ``TF_CPP_MIN_LOG_LEVEL`` unless it is set: TensorFlow's C++ INFO and WARNING lines
+#: are hidden (they drown the progress output; pilco logs through :mod:`logging`)
+TF_LOG_LEVEL = "2"
+
+#: environment variables that size TensorFlow's and the BLAS libraries' thread pools
+THREAD_VARIABLES = ("TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS", "OMP_NUM_THREADS",
+                    "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s: %(message)s"
+
+# ------------------------------------------------------------------ TensorFlow's probe
+# What TensorFlow writes to file descriptor 2 on a machine without CUDA. The drivers
+# line comes from the CUDA runtime stub at ``import tensorflow`` whatever
+# TF_CPP_MIN_LOG_LEVEL says; the cuInit line when the devices are first listed (hidden
+# by TF_CPP_MIN_LOG_LEVEL=3 only); the factory lines from builds that register their
+# CUDA libraries twice.
+_NO_DRIVERS = re.compile(rb"Could not find cuda drivers on your machine, GPU will not be used")
+_CUINIT = re.compile(rb"failed call to cuInit")
+_FACTORY = re.compile(rb"Unable to register cu[A-Za-z]+ factory")
+# absl's note before its first log line; dropped with the line it introduces
+_ABSL_NOTE = re.compile(rb"^WARNING: All log messages before absl::InitializeLog\(\) is called "
+                        rb"are written to STDERR\s*$")
+
+
+def _probe_lines(lines: List[bytes]) -> List[bool]:
+    """Which of ``lines`` (stderr written during TensorFlow's import) are its CUDA probe:
+    the no-drivers and factory lines, the cuInit failure when the same import reported
+    no drivers (on a machine with drivers that failure is a real error), and absl's
+    note right before a line so dropped."""
+    no_drivers = any(_NO_DRIVERS.search(line) for line in lines)
+    drop = [bool(_NO_DRIVERS.search(line) or _FACTORY.search(line)
+                 or (no_drivers and _CUINIT.search(line))) for line in lines]
+    for i in range(len(lines) - 1):
+        if not drop[i] and drop[i + 1] and _ABSL_NOTE.match(lines[i]):
+            drop[i] = True
+    return drop
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    while data:
+        data = data[os.write(fd, data):]
+
+
+def _flush_python_stderr() -> None:
+    for stream in (sys.stderr, sys.__stderr__):
+        with contextlib.suppress(Exception):
+            stream.flush()
+
+
+@contextlib.contextmanager
+def _stderr_without_probe_lines() -> Iterator[None]:
+    """File descriptor 2 goes to a temporary file inside the block; afterwards, also
+    when the block raises, fd 2 is restored and every line written meanwhile is written
+    to it again except TensorFlow's CUDA probe lines (:func:`_probe_lines`). A temporary
+    file rather than a pipe: it never fills up, so nothing the block writes can block it.
+    If fd 2 cannot be redirected (closed, no temporary file), the block runs as is."""
+    _flush_python_stderr()
+    try:
+        capture = tempfile.TemporaryFile()
+    except OSError:
+        yield
+        return
+    try:
+        saved = os.dup(2)
+    except OSError:
+        capture.close()
+        yield
+        return
+    try:
+        os.dup2(capture.fileno(), 2)
+        try:
+            yield
+        finally:
+            _flush_python_stderr()
+            os.dup2(saved, 2)
+    finally:
+        os.close(saved)
+        try:
+            capture.seek(0)
+            lines = capture.read().splitlines(keepends=True)
+        finally:
+            capture.close()
+        drop = _probe_lines(lines)
+        with contextlib.suppress(OSError):  # a closed stderr must not mask the import's error
+            _write_all(2, b"".join(line for line, gone in zip(lines, drop) if not gone))
+
+
+class _FilteredLoader(importlib.abc.Loader):
+    """TensorFlow's own loader, run by :func:`_stderr_without_probe_lines` and followed
+    there by a listing of the devices (which makes TensorFlow probe CUDA now, inside the
+    filter, rather than at its first operation). The listing leaves every setting that
+    must precede TensorFlow's start (threads, visible devices) still open."""
+
+    def __init__(self, loader, finder: "_TensorFlowImportFilter"):
+        self._loader = loader
+        self._finder = finder
+
+    def create_module(self, spec):
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module) -> None:
+        # the module keeps its own loader for everything after this import
+        module.__loader__ = self._loader
+        if getattr(module, "__spec__", None) is not None:
+            module.__spec__.loader = self._loader
+        self._finder.done = True
+        with _stderr_without_probe_lines():
+            self._loader.exec_module(module)
+            with contextlib.suppress(Exception):  # quieting must never break an import
+                module.config.list_physical_devices("GPU")
+
+
+class _TensorFlowImportFilter(importlib.abc.MetaPathFinder):
+    """Finds ``tensorflow`` as the finders after it do, with :class:`_FilteredLoader` as
+    its loader; every other module, and ``tensorflow`` once imported, are left to them."""
+
+    def __init__(self) -> None:
+        self.done = False
+
+    def find_spec(self, fullname, path=None, target=None):
+        if fullname != "tensorflow" or self.done:
+            return None
+        for finder in list(sys.meta_path):
+            if finder is self or not hasattr(finder, "find_spec"):
+                continue
+            spec = finder.find_spec(fullname, path, target)
+            if spec is not None:
+                break
+        else:
+            return None
+        if spec.loader is not None and hasattr(spec.loader, "exec_module"):
+            spec.loader = _FilteredLoader(spec.loader, self)
+        return spec
+
+
+def quiet_tensorflow() -> None:
+    """Quiet TensorFlow's start-up on stderr; call before anything imports TensorFlow.
+
+    Sets ``TF_CPP_MIN_LOG_LEVEL`` to :data:`TF_LOG_LEVEL` unless it is set (processes
+    started from here inherit it), and makes the first ``import tensorflow`` (now or
+    later, wherever it happens) run with file descriptor 2 redirected, then write back
+    everything it wrote except the CUDA probe lines of a machine without CUDA ("Could
+    not find cuda drivers on your machine, GPU will not be used.", which no log level
+    hides, "failed call to cuInit", "Unable to register cuDNN/cuFFT/cuBLAS factory").
+    Other output of the import, a traceback included, is written back in full once the
+    import ends (a process killed during the import loses it). A process that does not
+    import TensorFlow pays nothing.
+
+    Does nothing when TensorFlow is imported already, nor when ``TF_CPP_MIN_LOG_LEVEL``
+    is ``0`` (asked for TensorFlow's every line). Calling it again does nothing more.
+    """
+    if "tensorflow" in sys.modules:
+        return
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", TF_LOG_LEVEL)
+    if os.environ["TF_CPP_MIN_LOG_LEVEL"].strip() == "0":
+        return
+    if not any(isinstance(f, _TensorFlowImportFilter) for f in sys.meta_path):
+        sys.meta_path.insert(0, _TensorFlowImportFilter())
+
+
+# ----------------------------------------------------------------------------- logging
+def log_level(level: Union[str, int]) -> int:
+    """The :mod:`logging` level named by ``level`` (``"warning"``, ``"INFO"``; any case),
+    or ``level`` itself when it is an integer. ValueError naming ``level`` for anything
+    else; also fit as an argparse ``type=``."""
+    if isinstance(level, int) and not isinstance(level, bool):
+        return level
+    value = logging.getLevelName(str(level).strip().upper())
+    if not isinstance(value, int):
+        names = ", ".join(logging.getLevelName(n) for n in (logging.DEBUG, logging.INFO,
+                                                             logging.WARNING, logging.ERROR,
+                                                             logging.CRITICAL))
+        raise ValueError(f"unknown logging level {level!r}; choose one of {names}")
+    return value
+
+
+def configure_logging(level: Union[str, int], logger: Optional[str] = None) -> None:
+    """Log to stderr (``logging.basicConfig``, lines "time name LEVEL: message") at
+    ``level`` (:func:`log_level`: a name in any case, or a number; ValueError naming a
+    bad one). With ``logger`` (e.g. ``"pilco"``) only that logger gets ``level`` and the
+    others stay at WARNING (the libraries a command uses keep their INFO lines to
+    themselves). Like ``basicConfig``, adds no handler when the root logger has one."""
+    value = log_level(level)
+    if logger is None:
+        logging.basicConfig(level=value, format=LOG_FORMAT)
+    else:
+        logging.basicConfig(level=logging.WARNING, format=LOG_FORMAT)
+        logging.getLogger(logger).setLevel(value)
+
+
+# ----------------------------------------------------------------------------- threads
+def _positive(threads) -> int:
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    return threads
+
+
+def configure_threads(threads: Optional[int] = None) -> None:
+    """Size this process's TensorFlow thread pools.
+
+    ``None`` (a task's process): one intra-op thread unless ``TF_NUM_INTRAOP_THREADS``
+    says otherwise (the inter-op pool keeps its default, every CPU): the policy
+    objective's groups of output pairs (:func:`pilco.moments.pair_groups`) then run
+    side by side, one per CPU, which keeps the CPUs busier than TensorFlow's default of
+    splitting each of these small batched operations over them (docs/performance.md).
+    Takes effect in a process that has not run a TensorFlow operation yet.
+
+    ``threads`` (``python -m pilco.diagnose --threads N``): ``threads`` intra- and
+    inter-op threads through ``tf.config.threading`` (imports TensorFlow; before its
+    first operation, else TensorFlow raises RuntimeError).
+    """
+    if threads is None:
+        os.environ.setdefault("TF_NUM_INTRAOP_THREADS", "1")
+        return
+    threads = _positive(threads)
+    import tensorflow as tf
+
+    tf.config.threading.set_intra_op_parallelism_threads(threads)
+    tf.config.threading.set_inter_op_parallelism_threads(threads)
+
+
+def thread_environment(threads: int, base: Optional[Mapping[str, str]] = None
+                       ) -> Dict[str, str]:
+    """The environment of a process given ``threads`` CPUs (a sweep's run): ``base``
+    (default ``os.environ``) with TensorFlow's inter-op pool and the OpenMP/OpenBLAS/MKL
+    pools set to ``threads`` threads and TensorFlow's intra-op pool to one (as
+    :func:`configure_threads`, for the same reason), ``TF_CPP_MIN_LOG_LEVEL`` to
+    :data:`TF_LOG_LEVEL` unless set. ValueError unless ``threads`` is a positive
+    integer."""
+    threads = _positive(threads)
+    env = dict(os.environ if base is None else base)
+    env.update({name: str(threads) for name in THREAD_VARIABLES})
+    env["TF_NUM_INTRAOP_THREADS"] = "1"
+    env.setdefault("TF_CPP_MIN_LOG_LEVEL", TF_LOG_LEVEL)
+    return env

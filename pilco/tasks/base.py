@@ -1,0 +1,203 @@
+"""The outline every task shares: :class:`Task`.
+
+A task is a settings class (a frozen dataclass, :mod:`pilco.tasks.settings`) and the
+builders that turn one settings object into a run: the loop's configuration
+(:meth:`Task.config`), the agent (:meth:`Task.agent_builder`), the hooks the loop calls
+(:meth:`Task.hooks`), the figures. The settings are handed down as one typed object;
+nothing below reads the command line. :meth:`Task.main` is the whole command::
+
+    settings = task.parse(argv)         # flags, --preset, --resume
+    exp = task.experiment(settings)     # new run, or the saved one
+    summary = task.run(exp, settings)   # the paper's Algorithm 1 (or the task's loop)
+    return task.finish(exp, summary, settings)  # tables, figures, exit status
+"""
+from __future__ import annotations
+
+import logging
+import os
+from typing import Any, Callable, ClassVar, Dict, List, Mapping, Optional, Sequence, Type
+
+from ..experiment import Experiment, ExperimentConfig
+from ..experiment.report import format_episode_table, format_timing_table
+from .settings import RunSettings, build_parser, parse_settings, settings_to_dict
+
+__all__ = ["Task"]
+
+logger = logging.getLogger(__name__)
+
+
+class Task:
+    """One of the paper's experiments, built from a settings object.
+
+    Subclasses set :attr:`name`, :attr:`settings`, :attr:`description` (and
+    :attr:`presets`, :attr:`paper_seconds`), and define :meth:`config` and
+    :meth:`agent_builder`; the other methods have defaults that run the loop of
+    :class:`~pilco.experiment.Experiment`.
+    """
+
+    #: the task's name (the summary's ``task``, the sweep's and the registry's key)
+    name: ClassVar[str] = ""
+    #: the task's settings class
+    settings: ClassVar[Type[RunSettings]] = RunSettings
+    #: one line for ``--help``
+    description: ClassVar[str] = ""
+    #: named sets of settings (``--preset NAME``): ``{name: {setting: value}}``
+    presets: ClassVar[Mapping[str, Mapping[str, Any]]] = {}
+    #: the paper's timings of the task, shown beside the run's (``{phase: seconds}``)
+    paper_seconds: ClassVar[Optional[Dict[str, float]]] = None
+
+    # -- settings -------------------------------------------------------------------------
+    def parser(self):
+        """The task's :class:`argparse.ArgumentParser` (its flags and defaults)."""
+        return build_parser(self.settings, self.description, self.presets, self.prog)
+
+    @property
+    def prog(self) -> str:
+        return f"python -m pilco.tasks {self.name}"
+
+    def parse(self, argv: Optional[Sequence[str]] = None) -> RunSettings:
+        """The settings of command line ``argv`` (``--resume`` restores the saved ones,
+        :func:`~pilco.tasks.settings.parse_settings`), checked by :meth:`check`; sets up
+        logging at ``--log-level`` and the TensorFlow threads."""
+        from ..runtime import configure_logging, configure_threads
+
+        settings = parse_settings(self.settings, argv, description=self.description,
+                                  presets=self.presets, prog=self.prog)
+        try:
+            settings = self.check(settings)
+        except ValueError as err:
+            self.parser().error(str(err))
+        configure_logging(settings.log_level)
+        configure_threads()
+        return settings
+
+    def check(self, settings: RunSettings) -> RunSettings:
+        """Settings derived from others and checks across settings: returns the settings
+        to run with, or raises ValueError naming the conflict (a usage error)."""
+        return settings
+
+    # -- building a run -------------------------------------------------------------------
+    def config(self, settings: RunSettings) -> ExperimentConfig:
+        """The loop's :class:`~pilco.experiment.ExperimentConfig`."""
+        raise NotImplementedError
+
+    def agent_builder(self, settings: RunSettings, env) -> Callable[..., Any]:
+        """``(data, start_states) -> PILCO`` for the run's ``env``."""
+        raise NotImplementedError
+
+    def loop_config(self, settings: RunSettings, **task: Any) -> ExperimentConfig:
+        """:class:`~pilco.experiment.ExperimentConfig` of the common settings plus the
+        task's own fields ``task`` (env id and arguments, costs, the solved rule)."""
+        s = settings
+        return ExperimentConfig(
+            task=self.name, seed=s.seed, episodes=s.episodes,
+            random_episodes=s.random_episodes, steps=s.horizon,
+            max_data=s.max_data, model_iters=s.model_iters, model_restarts=s.model_restarts,
+            model_min_rel_improvement=s.model_min_rel_improvement,
+            retrain_unchanged_model=s.retrain_unchanged_model,
+            policy_iters=s.policy_iters, policy_restarts=s.policy_restarts,
+            policy_method=s.policy_optimizer,
+            policy_min_rel_improvement=s.policy_min_rel_improvement,
+            policy_patience=s.policy_patience, policy_early_stop=s.policy_early_stop,
+            policy_restart_when=s.policy_restart_when,
+            policy_restart_from=s.policy_restart_from,
+            policy_warm_start=s.policy_warm_start, policy_iters_first=s.policy_iters_first,
+            render=not s.no_render, predictions=not s.no_figures, quiet=s.quiet, **task)
+
+    #: False when the task changes its system during a run (the adaptation breaks its arm):
+    #: an env made from the settings is then not the system a late episode ran on
+    system_from_settings: ClassVar[bool] = True
+    #: True when :meth:`render_fn` draws the final episode (the env then never renders)
+    replays_frames: ClassVar[bool] = False
+
+    def make_env(self, settings: RunSettings, config: ExperimentConfig):
+        """The run's environment (made before the agent, whose builder may need it)."""
+        from ..experiment import make_env
+
+        return make_env(config.env_id, config.env_kwargs,
+                        render=config.render and not self.replays_frames)
+
+    def render_fn(self, settings: RunSettings, env) -> Optional[Callable]:
+        """``Episode -> frames`` drawing the final episode in another way than the env's
+        own renderer (None: the env renders)."""
+        return None
+
+    def hooks(self, settings: RunSettings, env) -> Dict[str, Any]:
+        """Keyword arguments of :class:`~pilco.experiment.Experiment` beyond the config,
+        the agent builder and the env: ``after_model_fit``, ``before_policy_search``,
+        ``success_fn``."""
+        return {}
+
+    def experiment(self, settings: RunSettings) -> Experiment:
+        """A new run in ``settings.output``, or the one saved there with ``--resume``."""
+        config = self.config(settings)
+        env = self.make_env(settings, config)
+        kwargs = dict(make_env=lambda: env, render_fn=self.render_fn(settings, env),
+                      settings=settings_to_dict(settings), **self.hooks(settings, env))
+        build = self.agent_builder(settings, env)
+        if settings.resume:
+            exp = Experiment.resume(settings.output, config, build, **kwargs)
+        else:
+            exp = Experiment(config, settings.output, build, **kwargs)
+        self.prepare(exp, settings)
+        return exp
+
+    def prepare(self, exp: Experiment, settings: RunSettings) -> None:
+        """Task state of a new or resumed run, set after the experiment is opened."""
+
+    def reopen(self, directory: str) -> Experiment:
+        """The run saved in ``directory`` with its saved settings, quiet and without
+        rendering (e.g. for a diagnosis); the caller's log level is kept."""
+        level = logging.getLogger().level
+        try:
+            settings = self.parse(["--resume", directory, "--quiet", "--no-render"])
+        finally:
+            logging.getLogger().setLevel(level)
+        return self.experiment(settings)
+
+    # -- running and reporting ------------------------------------------------------------
+    def run(self, exp: Experiment, settings: RunSettings) -> Dict[str, Any]:
+        """The run's learning; returns the summary."""
+        return exp.run()
+
+    def figures(self, exp: Experiment, settings: RunSettings) -> List[str]:
+        """Draw the run's figures into its directory; returns their paths."""
+        return []
+
+    def notes(self, summary: Dict[str, Any]) -> List[str]:
+        """Lines printed after the episode table."""
+        return []
+
+    def finish(self, exp: Experiment, summary: Dict[str, Any],
+               settings: RunSettings) -> int:
+        """Print the episode and timing tables, draw the figures unless ``--no-figures``,
+        close the env; returns the exit status: 130 after an interrupt (with how to
+        resume), else 0."""
+        print(format_episode_table(summary))
+        for note in self.notes(summary):
+            print(note)
+        print()
+        title = (f"Timing ({self.name}, seed {settings.seed}, "
+                 f"{len(summary['episodes'])} episodes)")
+        print(format_timing_table(summary["seconds"], title=title,
+                                  reference=self.paper_seconds))
+        try:
+            if exp.interrupted:
+                print(f"\nInterrupted: agent and data saved in {exp.directory}; continue "
+                      f"with --resume {exp.directory}")
+                return 130
+            if not settings.no_figures:
+                paths = self.figures(exp, settings)
+                print(f"\nFigures: {', '.join(os.path.basename(p) for p in paths)}")
+            print(f"Solved: {summary['solved']} (episode {summary['solved_at_episode']}); "
+                  f"success: {summary['success']}; results in {exp.directory}")
+            return 0
+        finally:
+            exp.close()
+
+    def main(self, argv: Optional[Sequence[str]] = None) -> int:
+        """The task as a command; returns the exit status."""
+        settings = self.parse(argv)
+        exp = self.experiment(settings)
+        summary = self.run(exp, settings)
+        return self.finish(exp, summary, settings)

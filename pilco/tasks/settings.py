@@ -1,0 +1,299 @@
+"""A task's settings as one frozen dataclass, and the command line made from it.
+
+Every setting is a dataclass field declared with :func:`setting`: its default, its help
+text, how a command-line value is read, and the flag group it belongs to. From these
+fields :func:`build_parser` makes the flags (``policy_iters`` is ``--policy-iters``), so
+each setting has one definition and one default. :class:`RunSettings` holds the settings
+every task has; a task subclasses it with :func:`task_settings`, adding its own fields
+and giving inherited ones other defaults.
+
+:func:`parse_settings` reads a command line into a settings object. Precedence, lowest
+first: the fields' defaults, the ``--preset``'s values, the settings saved in
+``DIR/progress.json`` with ``--resume DIR``, the flags given on the command line (so only
+flags given again change a resumed run). A setting missing from a saved run (one added
+after the run was saved) takes its field's default.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+from typing import Any, Callable, Dict, Iterable, Mapping, Optional, Sequence, Type, TypeVar
+
+__all__ = ["setting", "task_settings", "RunSettings", "build_parser", "parse_settings",
+           "settings_from_dict", "settings_to_dict", "saved_settings",
+           "positive_float", "non_negative_float", "positive_int", "non_negative_int",
+           "optional_float"]
+
+S = TypeVar("S", bound="RunSettings")
+
+#: the metadata keys of a :func:`setting` field
+_META = "pilco_flag"
+
+
+def _number(kind: type, test: Callable[[float], bool], what: str) -> Callable[[str], Any]:
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            noun = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
+        if not (math.isfinite(value) and test(value)):
+            raise argparse.ArgumentTypeError(f"must be {what} and finite, got {text}")
+        return value
+
+    parse.__name__ = what.replace(" ", "_")
+    return parse
+
+
+#: command-line readers of values that must be > 0, >= 0, an integer >= 1 or >= 0
+positive_float = _number(float, lambda v: v > 0, "positive")
+non_negative_float = _number(float, lambda v: v >= 0, "zero or positive")
+positive_int = _number(int, lambda v: v >= 1, "at least 1")
+non_negative_int = _number(int, lambda v: v >= 0, "at least 0")
+
+
+def level_name(text: str) -> str:
+    """A logging level's name (any case) or number, kept as given; ValueError otherwise."""
+    from ..runtime import log_level
+
+    log_level(text)
+    return text
+
+
+def optional_float(text: str) -> Optional[float]:
+    """A number, or ``None``/``none`` for "not set"."""
+    if text.strip().lower() == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or None, got {text!r}") from None
+
+
+def setting(default: Any, help: str, *, kind: Optional[Callable[[str], Any]] = None,  # noqa: A002
+            choices: Optional[Sequence[Any]] = None, nargs: Any = None,
+            metavar: Any = None, group: str = "task", negatable: bool = False,
+            flag: bool = True) -> Any:
+    """A settings field: ``default`` and the flag's ``help``.
+
+    ``kind`` reads a command-line value (default: the type of ``default``; a bool is a
+    switch that sets True, or with ``negatable`` also has a ``--no-`` form); ``choices``,
+    ``nargs`` and ``metavar`` as in :meth:`argparse.ArgumentParser.add_argument` (a value
+    with ``nargs`` is kept as a tuple); ``group``: the help section; ``flag=False``: a
+    setting the task derives itself, with no flag."""
+    meta = dict(help=help, kind=kind, choices=choices, nargs=nargs, metavar=metavar,
+                group=group, negatable=negatable, flag=flag)
+    return dataclasses.field(default=default, metadata={_META: meta})
+
+
+def task_settings(**defaults: Any) -> Callable[[type], type]:
+    """Class decorator making a frozen settings dataclass; ``defaults`` give inherited
+    fields new defaults (their help and reading stay the base's)."""
+
+    def wrap(cls: type) -> type:
+        inherited = {f.name: f for base in cls.__mro__[1:] if dataclasses.is_dataclass(base)
+                     for f in dataclasses.fields(base)}
+        unknown = sorted(set(defaults) - set(inherited))
+        if unknown:
+            raise TypeError(f"{cls.__name__}: no inherited settings {unknown} to give a "
+                            f"default")
+        annotations = dict(cls.__dict__.get("__annotations__", {}))
+        for name, value in defaults.items():
+            annotations[name] = inherited[name].type
+            setattr(cls, name, dataclasses.field(default=value,
+                                                 metadata=inherited[name].metadata))
+        cls.__annotations__ = annotations
+        return dataclasses.dataclass(frozen=True)(cls)
+
+    return wrap
+
+
+@task_settings()
+class RunSettings:
+    """The settings every task has: the run, the loop and the optimisers."""
+
+    # -- the run
+    seed: int = setting(0, "random seed", kind=non_negative_int, group="experiment")
+    episodes: Optional[int] = setting(4, "total episodes including the random ones",
+                                      kind=positive_int, group="experiment")
+    random_episodes: int = setting(1, "episodes with random actions first",
+                                   kind=non_negative_int, group="experiment")
+    horizon: int = setting(50, "steps per episode and planning horizon", kind=positive_int,
+                           group="experiment")
+    output: str = setting("runs/run-seed{seed}", "run directory ({seed} is replaced)",
+                          group="experiment")
+    resume: Optional[str] = setting(None, "continue the run saved in DIR with its next "
+                                    "episode", kind=str, metavar="DIR", group="experiment")
+    quiet: bool = setting(False, "no progress bars", group="experiment")
+    no_render: bool = setting(False, "do not render the last episode", group="experiment")
+    no_figures: bool = setting(False, "do not draw figures", group="experiment")
+    log_level: str = setting("WARNING", "logging level", kind=level_name, group="experiment")
+    preset: Optional[str] = setting(None, "start from a named set of settings; flags given "
+                                    "still win", kind=str, group="experiment")
+    # -- learning
+    basis_functions: int = setting(10, "RBF policy basis functions", kind=positive_int,
+                                   group="learning")
+    policy_iters: int = setting(50, "optimiser iterations per policy optimisation",
+                                kind=positive_int, group="learning")
+    policy_restarts: int = setting(1, "policy optimisation restarts", kind=positive_int,
+                                   group="learning")
+    policy_restart_from: int = setting(
+        1, "episode (1-based, random ones counted) from which --policy-restarts apply",
+        kind=positive_int, group="learning")
+    policy_patience: int = setting(10, "iterations for --policy-min-rel-improvement",
+                                   kind=positive_int, group="learning")
+    policy_iters_first: Optional[int] = setting(
+        None, "iterations of the first policy optimisation (None: --policy-iters)",
+        kind=positive_int, group="learning")
+    model_iters: int = setting(1000, "L-BFGS iterations of GP training", kind=positive_int,
+                               group="learning")
+    model_restarts: int = setting(1, "GP training restarts", kind=positive_int,
+                                  group="learning")
+    max_data: Optional[int] = setting(
+        None, "GP learns from the first N transitions only (0 or None: all)",
+        kind=non_negative_int, group="learning")
+    policy_optimizer: str = setting(
+        "L-BFGS-B", "policy optimiser (BFGS: dense update, as the MATLAB release)",
+        kind=str.upper, choices=("L-BFGS-B", "BFGS"), group="learning")
+    policy_min_rel_improvement: Optional[float] = setting(
+        None, "stop a policy optimisation once its predicted return grew by less than this "
+        "fraction of it over the last --policy-patience iterations (0 or None: never)",
+        kind=float, group="learning")
+    policy_early_stop: str = setting(
+        "always", "apply --policy-min-rel-improvement always, or only once an episode was "
+        "solved", choices=("always", "solved"), group="learning")
+    policy_restart_when: str = setting(
+        "always", "run the --policy-restarts restarts from random policies in every policy "
+        "optimisation, or only until an episode was solved", choices=("always", "unsolved"),
+        group="learning")
+    policy_warm_start: str = setting(
+        "always", "start each policy search from the previous episode's policy always, or "
+        "only once an episode was solved (before: from a fresh random policy)",
+        choices=("always", "solved"), group="learning")
+    model_min_rel_improvement: Optional[float] = setting(
+        None, "stop GP training once its loss fell by less than this fraction of it over "
+        "the last 10 iterations (0 or None: never)", kind=float, group="learning")
+    retrain_unchanged_model: bool = setting(
+        False, "train the GPs again even if their training data did not change",
+        group="learning")
+
+
+def _meta(field: dataclasses.Field) -> Dict[str, Any]:
+    return field.metadata.get(_META, {})
+
+
+def _flag_fields(cls: type) -> Iterable[dataclasses.Field]:
+    return [f for f in dataclasses.fields(cls) if _meta(f).get("flag", False)]
+
+
+def build_parser(cls: Type[RunSettings], description: str = "",
+                 presets: Optional[Mapping[str, Mapping[str, Any]]] = None,
+                 prog: Optional[str] = None) -> argparse.ArgumentParser:
+    """The flags of the settings class ``cls``, one per field, grouped as declared. A flag
+    left out of the command line is absent from the parsed namespace (defaults are
+    applied by :func:`parse_settings`, which knows presets and saved runs); ``--help``
+    shows each field's default."""
+    presets = dict(presets or {})
+    parser = argparse.ArgumentParser(prog=prog, description=description,
+                                     argument_default=argparse.SUPPRESS)
+    groups: Dict[str, Any] = {}
+    for field in _flag_fields(cls):
+        meta = _meta(field)
+        group = groups.get(meta["group"])
+        if group is None:
+            group = groups[meta["group"]] = parser.add_argument_group(meta["group"])
+        name = "--" + field.name.replace("_", "-")
+        text = f"{meta['help']} (default {_shown(field.default)})"
+        if field.name == "preset":
+            if not presets:
+                continue
+            group.add_argument(name, dest=field.name, choices=sorted(presets), help=(
+                text + "; " + "; ".join(f"{k}: {_describe(v)}" for k, v in presets.items())))
+            continue
+        kwargs: Dict[str, Any] = dict(dest=field.name, help=text)
+        if isinstance(field.default, bool) and meta["kind"] is None:
+            kwargs["action"] = (argparse.BooleanOptionalAction if meta["negatable"]
+                                else "store_true")
+        else:
+            kwargs["type"] = meta["kind"] or type(field.default)
+            for key in ("choices", "nargs", "metavar"):
+                if meta[key] is not None:
+                    kwargs[key] = tuple(meta[key]) if key == "metavar" and isinstance(
+                        meta[key], list) else meta[key]
+        group.add_argument(name, **kwargs)
+    return parser
+
+
+def _shown(value: Any) -> str:
+    return " ".join(map(str, value)) if isinstance(value, tuple) else str(value)
+
+
+def _describe(values: Mapping[str, Any]) -> str:
+    return " ".join(f"--{k.replace('_', '-')} {_shown(v)}" for k, v in values.items())
+
+
+def settings_from_dict(cls: Type[S], values: Mapping[str, Any]) -> S:
+    """``cls`` from a mapping such as a saved run's settings: unknown keys are dropped
+    (settings since removed), missing ones take their field's default, lists become the
+    tuples of fields with several values."""
+    kept: Dict[str, Any] = {}
+    for field in dataclasses.fields(cls):
+        if field.name not in values:
+            continue
+        value = values[field.name]
+        if isinstance(value, list):
+            value = tuple(value)
+        kept[field.name] = value
+    return cls(**kept)
+
+
+def settings_to_dict(settings: RunSettings) -> Dict[str, Any]:
+    """The settings as a JSON-ready dict (tuples as lists)."""
+    return {k: list(v) if isinstance(v, tuple) else v
+            for k, v in dataclasses.asdict(settings).items()}
+
+
+def saved_settings(directory: str) -> Dict[str, Any]:
+    """The settings saved in ``directory/progress.json`` (runs saved by older versions
+    stored them under ``args``); raises FileNotFoundError without that file."""
+    with open(os.path.join(directory, "progress.json"), encoding="utf-8") as f:
+        progress = json.load(f)
+    return dict(progress.get("settings") or progress.get("args") or {})
+
+
+def parse_settings(cls: Type[S], argv: Optional[Sequence[str]] = None, *,
+                   description: str = "",
+                   presets: Optional[Mapping[str, Mapping[str, Any]]] = None,
+                   prog: Optional[str] = None) -> S:
+    """The settings of a command line (precedence in the module's docstring); ``output``
+    is ``--resume``'s directory on resume, else ``--output`` with ``{seed}`` replaced.
+    Bad values exit with argparse's usage error (status 2) naming the flag."""
+    presets = {k: dict(v) for k, v in (presets or {}).items()}
+    names = {f.name for f in dataclasses.fields(cls)}
+    for name, values in presets.items():
+        unknown = sorted(set(values) - names)
+        if unknown:
+            raise ValueError(f"preset {name!r} sets unknown settings {unknown}")
+    parser = build_parser(cls, description, presets, prog)
+    given = vars(parser.parse_args(argv))
+    saved: Dict[str, Any] = {}
+    if given.get("resume"):
+        try:
+            saved = saved_settings(given["resume"])
+        except FileNotFoundError:
+            parser.error(f"--resume {given['resume']}: no progress.json there")
+    values: Dict[str, Any] = {}
+    preset = given.get("preset") or saved.get("preset")
+    if preset:
+        if preset not in presets:
+            parser.error(f"--preset {preset}: this task has no such preset")
+        values.update(presets[preset])
+    values.update({k: v for k, v in saved.items() if k in names})
+    values.update(given)
+    settings = settings_from_dict(cls, values)
+    output = (settings.resume if settings.resume
+              else settings.output.format(seed=settings.seed))
+    return dataclasses.replace(settings, output=output)
