@@ -321,11 +321,12 @@ def count_evaluation(agent) -> Count:
 
 def pair_block_flops(outputs: int, n: int, inputs: int, horizon: int) -> int:
     """The n^2 terms of one objective + gradient, counted by hand from
-    ``pilco.moments._pair_second_moments`` (the dynamics GP's pair block; its hand-made
-    gradient has no n x n work): per step and per output pair p of P = E(E+1)/2, the
-    exponent ``leftT^T rightT`` (2(D+2)n^2 for D GP inputs), its ``exp`` (n^2),
-    ``Q [bJ, bJ * iiJ]^T`` (2(D+1)n^2) and ``Q^T bI`` (2n^2); per diagonal pair (E of
-    them) ``iK * Q`` (n^2) and its product with ``[1, iiJ]^T`` (2(D+1)n^2)."""
+    ``pilco.moments.pairs._pair_second_moments`` (the dynamics GP's pair block; its
+    hand-made gradient has no n x n work): per step and per output pair p of
+    P = E(E+1)/2, the exponent ``leftT^T rightT`` (2(D+2)n^2 for D GP inputs), its
+    ``exp`` (n^2), ``Q [bJ, bJ * iiJ]^T`` (2(D+1)n^2) and ``Q^T bI`` (2n^2); per diagonal
+    pair (E of them) ``iK * Q`` (n^2) and its product with ``[1, iiJ]^T``
+    (2(D+1)n^2)."""
     E, D = outputs, inputs
     P = E * (E + 1) // 2
     per_step = P * (2 * (D + 2) + 1 + 2 * (D + 1) + 2) + E * (1 + 2 * (D + 1))
@@ -450,14 +451,14 @@ def time_evaluation(agent, repeats: int, evaluate=None) -> Dict[str, object]:
 
 def pair_block_seconds(outputs: int, inputs: int, n: int, repeats: int) -> float:
     """Seconds of the n^2 work of one step alone: the forward pass of the dynamics GP's
-    pair block (``pilco.moments._pair_second_moments``, the library's function, all
-    E(E+1)/2 pairs in one group) on random inputs of the problem's shapes, the fastest of
-    ``repeats`` calls. Its gradient has no n x n work, so ``horizon`` times this is the
-    time the pair block's flops (:func:`pair_block_flops`) take at the speed TensorFlow's
-    kernels reach on those shapes by themselves."""
+    pair block (``pilco.moments.pairs._pair_second_moments``, the library's function,
+    all E(E+1)/2 pairs in one group) on random inputs of the problem's shapes, the
+    fastest of ``repeats`` calls. Its gradient has no n x n work, so ``horizon`` times
+    this is the time the pair block's flops (:func:`pair_block_flops`) take at the speed
+    TensorFlow's kernels reach on those shapes by themselves."""
     import tensorflow as tf
 
-    from pilco.moments import _pair_second_moments
+    from pilco.moments.pairs import _pair_second_moments
 
     E, D = outputs, inputs
     P = E * (E + 1) // 2
