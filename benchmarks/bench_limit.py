@@ -21,17 +21,18 @@ the objective's independent groups of output pairs still run side by side; numpy
 also on one thread), ``default`` is TensorFlow's and numpy's defaults (every CPU).
 
 How the flops are counted: the objective + gradient is traced as one ``tf.function``
-(with the dynamics GP's data in variables of static shape, so that every tensor's shape
-is known; the timed function is the library's own, unchanged). The graph is walked:
-function calls are followed into their graphs, the bodies of the horizon's loops (the
-forward one and its gradient) counted once per step. Per operation: a matrix product
-``[m, k] x [k, n]`` 2mkn per batch entry; an elementwise operation (arithmetic, ``exp``,
-``sin``, ...) one per output element; a reduction one per input element; ``AddN`` of k
-inputs k-1 per element; a d x d inverse 2d^3, log-determinant and LU solve 2d^3/3 (+2d^2
-per right-hand side), Cholesky d^3/3; data movement (reshape, concat, slice, gather,
-transpose, ...) none. So a transcendental function counts as one operation, as in
-TensorFlow's profiler. The counter is checked against an analytic count of the dominant
-term (the dynamics GP's n x n pair block, ``pair_block_flops``).
+(with the dynamics GP's data and the start distributions in variables of static shape,
+so that every tensor's shape is known; the timed function is the library's own,
+unchanged). The graph is walked: function calls are followed into their graphs, the
+bodies of the horizon's loops (the forward one and its gradient) counted once per step.
+Per operation: a matrix product ``[m, k] x [k, n]`` 2mkn per batch entry; an elementwise
+operation (arithmetic, ``exp``, ``sin``, ...) one per output element; a reduction one
+per input element; ``AddN`` of k inputs k-1 per element; a d x d inverse 2d^3,
+log-determinant and LU solve 2d^3/3 (+2d^2 per right-hand side), Cholesky d^3/3; data
+movement (reshape, concat, slice, gather, transpose, ...) none. So a transcendental
+function counts as one operation, as in TensorFlow's profiler. The counter is checked
+against an analytic count of the dominant term (the dynamics GP's n x n pair block,
+``pair_block_flops``).
 
 Columns of the table:
 
@@ -298,16 +299,18 @@ def loss_and_gradient(agent):
 
 def with_static_shapes(agent):
     """``agent`` (returned) with its dynamics model refreshed into the rollout's copies of
-    the dynamics GP's data, and those copies, variables of unknown size n (they are
-    resized as data grow), replaced by variables of the same values and static shapes:
+    the dynamics GP's data, and the rollout's variables of open shape (the GP data's n,
+    resized as data grow, and the start distributions' number of tasks T, whose rows the
+    objective slices out) replaced by variables of the same values and static shapes:
     every operation's shape is then known to the graph. For counting: the timings use
     agents as the library builds them."""
     import tensorflow as tf
 
     rollout = agent._rollout
     rollout.refresh(agent.mgpr)
-    for name in ("_centers", "_beta", "_inverse"):
-        setattr(rollout, name, tf.Variable(getattr(rollout, name).numpy(), trainable=False))
+    for name, value in list(vars(rollout).items()):
+        if isinstance(value, tf.Variable) and not value.shape.is_fully_defined():
+            setattr(rollout, name, tf.Variable(value.numpy(), trainable=False))
     rollout.retrace()  # the traces read the variables they were traced with
     return agent
 

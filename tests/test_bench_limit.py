@@ -47,6 +47,20 @@ def test_counts_a_matmul_and_elementwise_operations_exactly(bench):
     assert count["bytes"] == 8 * (47 + 30 + 31 + 16)
 
 
+def test_slices_are_data_movement_and_need_static_shapes(bench):
+    # a row of a [3, 4] matrix (as the objective takes each task's start): no flops, one
+    # executed operation, its input and output read and written once
+    graph = _graph(lambda x: x[1], tf.TensorSpec([3, 4], tf.float64))
+    count = bench.count_graph(graph, 1)
+    assert count["flops"] == 0
+    assert count["ops_by_type"]["StridedSlice"] == 1
+    assert count["bytes"] == 8 * (12 + 4)
+    assert count["unknown_shapes"] == [] and count["uncounted_types"] == []
+    # the same slice of a matrix with an open number of rows: its bytes are not known
+    graph = _graph(lambda x: x[1], tf.TensorSpec([None, 4], tf.float64))
+    assert bench.count_graph(graph, 1)["unknown_shapes"] == ["StridedSlice"]
+
+
 def test_batched_and_transposed_products(bench):
     a = tf.TensorSpec([6, 7, 3], tf.float64)  # transposed: [6, 3, 7]
     b = tf.TensorSpec([6, 7, 2], tf.float64)
@@ -85,6 +99,8 @@ def test_quick_path_functions_on_a_tiny_problem(bench):
     # times the library's variables of dynamic shape, but compiling twice is too slow here)
     agent = bench.build_problem("cartpole", 5)
     evaluate = bench.loss_and_gradient(bench.with_static_shapes(agent))
+    # the dynamics GP's data and the start distributions: no variable of open shape left
+    assert all(v.shape.is_fully_defined() for v in agent._rollout.variables)
     count = bench.count_graph(evaluate.get_concrete_function().graph, agent.horizon)
     assert _positive_finite(count["flops"]) and _positive_finite(count["bytes"])
     assert count["unknown_shapes"] == [] and count["uncounted_types"] == []
