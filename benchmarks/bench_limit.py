@@ -506,7 +506,7 @@ def elementwise_rates(elements: int, repeats: int) -> Dict[str, float]:
     a, b, c = (rng.standard_normal(elements) for _ in range(3))
     out = np.empty_like(a)
     ta, tb, tc = tf.constant(a), tf.constant(b), tf.constant(c)
-    fused = tf.function(lambda x, y, z: x * y + z)
+    fused = tf.function(lambda x, y, z: x * y + z, autograph=False)
 
     def with_numpy():
         np.multiply(a, b, out=out)
