@@ -11,6 +11,9 @@ this run ignores those outputs and discards its own. This file
   executes them with their full settings), and MuJoCo's headless EGL backend on Linux
   unless ``MUJOCO_GL`` is set. Kernels inherit this process's environment, so it is set
   here, at import, before any kernel starts;
+* compiles XLA programs (``tests/test_xla.py``) without LLVM's optimisations
+  (``XLA_FLAGS=--xla_backend_optimization_level=0`` unless ``XLA_FLAGS`` is set): the
+  tests check values, not speed, and compile in half the time;
 * limits each notebook to ``NOTEBOOK_TIMEOUT`` seconds in all (pytest-timeout; a
   ``--timeout`` on the command line replaces it) on top of nbmake's per-cell
   ``--nbmake-timeout``;
@@ -32,6 +35,7 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("PILCO_NOTEBOOK_FAST", "1")
+os.environ.setdefault("XLA_FLAGS", "--xla_backend_optimization_level=0")
 if sys.platform.startswith("linux"):
     os.environ.setdefault("MUJOCO_GL", "egl")   # as pilco.envs does; EGL is Linux-only
 

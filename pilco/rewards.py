@@ -16,7 +16,7 @@ import tensorflow as tf
 from gpflow.config import default_float
 
 from .angles import trig_moments
-from .moments import eye_like
+from .moments import compiled, eye_like
 from .protocols import Reward
 from .validation import (
     check_entries,
@@ -45,13 +45,19 @@ def _exp_reward_moments(m, s, W, t):
     # W (I + s W)^-1, written through a solve with the transposed system
     iSpW = tf.transpose(tf.linalg.solve(tf.transpose(eye + SW), W))
     mean = tf.exp(-0.5 * tf.matmul(tf.matmul(d, iSpW), d, transpose_b=True)) * tf.exp(
-        -0.5 * tf.linalg.slogdet(eye + SW)[1]
+        -0.5 * _logdet(eye + SW)
     )
     i2SpW = tf.transpose(tf.linalg.solve(tf.transpose(eye + 2.0 * SW), W))
     r2 = tf.exp(-tf.matmul(tf.matmul(d, i2SpW), d, transpose_b=True)) * tf.exp(
-        -0.5 * tf.linalg.slogdet(eye + 2.0 * SW)[1]
+        -0.5 * _logdet(eye + 2.0 * SW)
     )
     return mean, r2 - mean * mean
+
+
+def _logdet(A):
+    """log det of ``I + s W`` (positive): ``slogdet``, or a QR factorisation in a graph
+    traced for XLA (:func:`pilco.moments.compiled.xla_compatible`)."""
+    return compiled.logdet(A) if compiled.in_xla_compatible() else tf.linalg.slogdet(A)[1]
 
 
 class _Reward(gpflow.base.Module):

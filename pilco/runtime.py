@@ -1,10 +1,13 @@
-"""Start-up of pilco's command-line entry points: TensorFlow's log lines, logging, threads.
+"""Start-up of pilco's command-line entry points: TensorFlow's log lines, logging, threads,
+XLA's compilation cache.
 
 Every command (``pilco``, ``python -m pilco.tasks``, ``python -m pilco.sweep``,
 ``python -m pilco.diagnose``) calls :func:`quiet_tensorflow` before anything imports
 TensorFlow, sets up logging with :func:`configure_logging` and the thread pools with
 :func:`configure_threads` (a process of its own) or :func:`thread_environment` (the
-environment of a process it starts).
+environment of a process it starts). A run that compiles its policy objective with XLA
+calls :func:`use_xla_cache`, so that the runs of a sweep (or a user's runs one after
+another) compile each data-size bucket once.
 
 Nothing here imports TensorFlow at import time.
 """
@@ -20,7 +23,8 @@ import tempfile
 from typing import Dict, Iterator, List, Mapping, Optional, Union
 
 __all__ = ["TF_LOG_LEVEL", "THREAD_VARIABLES", "quiet_tensorflow", "log_level",
-           "configure_logging", "configure_threads", "thread_environment"]
+           "configure_logging", "configure_threads", "thread_environment", "XLA_CACHE_VARIABLE",
+           "xla_cache_directory", "use_xla_cache"]
 
 #: ``TF_CPP_MIN_LOG_LEVEL`` unless it is set: TensorFlow's C++ INFO and WARNING lines
 #: are hidden (they drown the progress output; pilco logs through :mod:`logging`)
@@ -29,6 +33,11 @@ TF_LOG_LEVEL = "2"
 #: environment variables that size TensorFlow's and the BLAS libraries' thread pools
 THREAD_VARIABLES = ("TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS", "OMP_NUM_THREADS",
                     "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+#: environment variable naming the folder of XLA's persistent compilation cache (a sweep
+#: sets it to a folder in its output directory, shared by its runs)
+XLA_CACHE_VARIABLE = "PILCO_XLA_CACHE"
+_XLA_CACHE_FLAG = "--tf_xla_persistent_cache_directory"
 
 LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s: %(message)s"
 
@@ -257,3 +266,40 @@ def thread_environment(threads: int, base: Optional[Mapping[str, str]] = None
     env["TF_NUM_INTRAOP_THREADS"] = "1"
     env.setdefault("TF_CPP_MIN_LOG_LEVEL", TF_LOG_LEVEL)
     return env
+
+
+def xla_cache_directory(environ: Optional[Mapping[str, str]] = None) -> str:
+    """The folder of XLA's persistent compilation cache: ``$PILCO_XLA_CACHE`` if set,
+    else ``pilco/xla`` in the user's cache folder (``$XDG_CACHE_HOME``, default
+    ``~/.cache``)."""
+    env = os.environ if environ is None else environ
+    if env.get(XLA_CACHE_VARIABLE):
+        return os.path.abspath(os.path.expanduser(env[XLA_CACHE_VARIABLE]))
+    base = env.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "pilco", "xla")
+
+
+def use_xla_cache(directory: Optional[str] = None) -> Optional[str]:
+    """Make this process's XLA compilations go through a persistent cache in
+    ``directory`` (default :func:`xla_cache_directory`): a program compiled by an
+    earlier run (same graph, same shapes, same CPU) is loaded instead of compiled again.
+
+    Adds ``--tf_xla_persistent_cache_directory`` to ``TF_XLA_FLAGS``, which TensorFlow
+    reads at its first XLA compilation, so call it before that; a cache folder already
+    named there is kept. Returns the folder in use, or None (with a warning) if it cannot
+    be created: the run then compiles without a cache.
+    """
+    flags = os.environ.get("TF_XLA_FLAGS", "")
+    if _XLA_CACHE_FLAG in flags:
+        match = re.search(re.escape(_XLA_CACHE_FLAG) + r"=(\S+)", flags)
+        return match.group(1) if match else None
+    directory = xla_cache_directory() if directory is None else directory
+    try:
+        os.makedirs(directory, exist_ok=True)
+    except OSError as err:
+        logging.getLogger(__name__).warning(
+            "XLA compilation cache %s cannot be created (%s); compiling without it",
+            directory, err)
+        return None
+    os.environ["TF_XLA_FLAGS"] = f"{flags} {_XLA_CACHE_FLAG}={directory}".strip()
+    return directory

@@ -29,6 +29,8 @@ class ExperimentConfig:
             (``None``: always ``model_iters``).
         policy_iters, policy_restarts: the same for the policy.
         policy_method: ``"L-BFGS-B"`` or ``"BFGS"`` (see ``PILCO.optimize_policy``).
+        policy_compiler: ``"graph"`` (TensorFlow) or ``"xla"`` (``optimize_policy``'s
+            ``jit_compile``).
         policy_iters_first: iterations of the first policy optimisation (``None``: as
             ``policy_iters``; the paper's code ran its 30 twice the first time).
         policy_min_rel_improvement, policy_patience: stop a policy optimisation run when its
@@ -79,6 +81,7 @@ class ExperimentConfig:
     policy_iters: int = 50
     policy_restarts: int = 1
     policy_method: str = "L-BFGS-B"
+    policy_compiler: str = "graph"
     policy_min_rel_improvement: Optional[float] = None
     policy_patience: int = 10
     policy_iters_first: Optional[int] = None
@@ -112,7 +115,8 @@ class ExperimentConfig:
         for name, (a, b) in (("policy_early_stop", ("always", "solved")),
                              ("policy_restart_when", ("always", "unsolved")),
                              ("policy_warm_start", ("always", "solved")),
-                             ("solved_rule", ("reach", "hold"))):
+                             ("solved_rule", ("reach", "hold")),
+                             ("policy_compiler", ("graph", "xla"))):
             value = getattr(self, name)
             if value not in (a, b):
                 raise ValueError(f"{name} must be {a!r} or {b!r}, got {value!r}")

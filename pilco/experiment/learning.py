@@ -59,7 +59,7 @@ def improve_policy(exp, number: int) -> float:
             seed=exp.episode_seed(number), callback=optimizer_callback(bar),
             method=cfg.policy_method,
             min_rel_improvement=cfg.policy_early_stop_at(solved),
-            patience=cfg.policy_patience)
+            patience=cfg.policy_patience, jit_compile=cfg.policy_compiler == "xla")
     logger.info("episode %d: predicted return %.3f over %d steps", number, expected,
                 agent.horizon)
     return expected

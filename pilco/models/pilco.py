@@ -126,7 +126,13 @@ class PILCO(gpflow.base.Module):
 
         self._rollout = Rollout(controller, reward, self.layout, U, self.policy_input_noise,
                                 horizon, m0, S0)
+        self._drop_compiled()
+
+    def _drop_compiled(self) -> None:
+        """Forget the policy optimisers' compiled objectives (TensorFlow graph and XLA):
+        they are traces of the controller, reward and starts they saw."""
         self._policy_optimizer = GuardedScipy()
+        self._xla_optimizer = GuardedScipy()
 
     def _check_controller(self, controller):
         """``controller`` follows the protocol, reads the policy's features and returns U
@@ -152,7 +158,7 @@ class PILCO(gpflow.base.Module):
     @controller.setter
     def controller(self, value):
         self._rollout.controller = self._check_controller(value)
-        self._policy_optimizer = GuardedScipy()  # its compiled objective saw the old one
+        self._drop_compiled()  # its compiled objective saw the old one
 
     def retrace(self) -> None:
         """Drop the compiled policy objective, trajectory and action functions, so that the
@@ -160,7 +166,7 @@ class PILCO(gpflow.base.Module):
         holds as a constant, e.g. ``controller.max_action``: assigning the same controller
         (or reward) object again does nothing, as for any TensorFlow module attribute."""
         self._rollout.retrace()
-        self._policy_optimizer = GuardedScipy()  # its compiled objective is a trace too
+        self._drop_compiled()  # its compiled objective is a trace too
 
     @property
     def reward(self):
@@ -170,7 +176,7 @@ class PILCO(gpflow.base.Module):
     @reward.setter
     def reward(self, value):
         self._rollout.reward = check_reward(value, self.state_dim)
-        self._policy_optimizer = GuardedScipy()  # its compiled objective saw the old one
+        self._drop_compiled()  # its compiled objective saw the old one
 
     @property
     def horizon(self) -> int:
@@ -178,7 +184,8 @@ class PILCO(gpflow.base.Module):
 
     @horizon.setter
     def horizon(self, value: int):
-        self._rollout.horizon.assign(check_positive_int(value, "horizon"))
+        if self._rollout.set_horizon(check_positive_int(value, "horizon")):
+            self._xla_optimizer = GuardedScipy()  # its trace has the horizon as a constant
 
     @property
     def m_init(self) -> np.ndarray:
@@ -224,7 +231,7 @@ class PILCO(gpflow.base.Module):
         of tasks retraces the policy objective at its next use."""
         m, S, shared = check_starts(m_init, S_init, self.state_dim, "initial state")
         if self._rollout.set_starts(m, S):
-            self._policy_optimizer = GuardedScipy()  # its compiled objective is a trace
+            self._drop_compiled()  # its compiled objective is a trace
         self._shared_S = shared
 
     @property
@@ -384,7 +391,7 @@ class PILCO(gpflow.base.Module):
     def optimize_policy(self, maxiter: int = 50, restarts: int = 1, seed: Optional[int] = None,
                         callback: Optional[Callable[[int], None]] = None,
                         method: str = "L-BFGS-B", min_rel_improvement: Optional[float] = None,
-                        patience: int = 10):
+                        patience: int = 10, jit_compile: bool = False):
         """Maximise the predicted total reward (summed over the tasks) over the policy
         parameters; returns the best total reward. The best policy evaluated by any run is
         kept (see :func:`pilco.models.policy_search.search_policy` for restarts, failures
@@ -396,6 +403,14 @@ class PILCO(gpflow.base.Module):
         stops the optimisation). With ``min_rel_improvement`` set, a run stops once its best
         expected return has grown by less than ``min_rel_improvement * max(1, |return|)``
         over the last ``patience`` iterations.
+
+        With ``jit_compile`` the objective and its gradient are compiled whole by XLA
+        (:meth:`pilco.models.rollout.Rollout.xla_policy_loss`; the dynamics model padded to
+        a few fixed sizes, so a run compiles once per size bucket, and a persistent
+        compilation cache, see :func:`pilco.runtime.xla_cache_environment`, makes later
+        runs start warm). It removes TensorFlow's per-operation overhead, which dominates
+        small problems (the cart-pole); the values agree with the graph's up to rounding,
+        so runs take other paths.
         """
         maxiter = check_positive_int(maxiter, "maxiter")
         restarts = check_positive_int(restarts, "restarts")
@@ -406,10 +421,14 @@ class PILCO(gpflow.base.Module):
         if restarts > 1 and not callable(getattr(self.controller, "randomize", None)):
             raise ValueError(f"restarts > 1 needs a controller with a randomize(seed=...) "
                              f"method; {type(self.controller).__name__} has none")
-        self._rollout.refresh(self.mgpr)
-        return search_policy(self._rollout.policy_loss, self.controller, self._policy_optimizer,
-                             maxiter, restarts, rng, method, callback, min_rel_improvement,
-                             patience)
+        jit_compile = check_bool(jit_compile, "jit_compile")
+        self._rollout.refresh(self.mgpr, pad=jit_compile)
+        if jit_compile:
+            loss, optimizer = self._rollout.xla_policy_loss, self._xla_optimizer
+        else:
+            loss, optimizer = self._rollout.policy_loss, self._policy_optimizer
+        return search_policy(loss, self.controller, optimizer, maxiter, restarts, rng, method,
+                             callback, min_rel_improvement, patience, jit_compile=jit_compile)
 
     # -- acting -----------------------------------------------------------------------------
     def compute_action(self, x) -> np.ndarray:

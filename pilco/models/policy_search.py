@@ -81,7 +81,8 @@ class GuardedScipy(TrackingScipy):
 def search_policy(loss: Callable[[], tf.Tensor], controller, optimizer: GuardedScipy,
                   maxiter: int, restarts: int, rng: np.random.Generator, method: str,
                   callback: Optional[Callable[[int], None]] = None,
-                  min_rel_improvement: Optional[float] = None, patience: int = 10) -> float:
+                  min_rel_improvement: Optional[float] = None, patience: int = 10,
+                  jit_compile: bool = False) -> float:
     """Minimise ``loss()`` (a scalar tensor) over ``controller.trainable_variables``.
 
     The first run starts from the current policy, each further restart from
@@ -90,7 +91,8 @@ def search_policy(loss: Callable[[], tf.Tensor], controller, optimizer: GuardedS
     (the start is kept if no point was finite). A run that fails numerically is logged and
     the next one goes on; an interruption (Ctrl-C, an exception of ``callback``) leaves the
     best policy so far in place and propagates. ``loss`` is compiled once by the optimiser
-    and reused by every run and later calls. Arguments are checked by the caller.
+    and reused by every run and later calls (by XLA with ``jit_compile``). Arguments are
+    checked by the caller.
     Returns ``-best loss``, the best total reward.
     """
     variables = controller.trainable_variables
@@ -105,6 +107,8 @@ def search_policy(loss: Callable[[], tf.Tensor], controller, optimizer: GuardedS
         restore(controller, start_values)
         return False
 
+    compile_args = dict(autograph=False, jit_compile=True) if jit_compile \
+        else dict(autograph=False)
     t0 = time.perf_counter()
     stalled: List[int] = []
     for r in range(restarts):
@@ -114,7 +118,7 @@ def search_policy(loss: Callable[[], tf.Tensor], controller, optimizer: GuardedS
         try:
             opt.minimize(
                 loss, variables, method=method,
-                options=dict(maxiter=maxiter), tf_fun_args=dict(autograph=False),
+                options=dict(maxiter=maxiter), tf_fun_args=compile_args,
                 step_callback=opt.step_callback(callback, min_rel_improvement, patience,
                                                 what="negative expected return"),
             )

@@ -20,6 +20,12 @@ compiled function, traced once; the
 dynamics GP's factorisation (Cholesky, ``beta`` and ``K^-1``) does not depend on the
 policy: :meth:`Rollout.refresh` computes it once per policy optimisation and stores it
 in non-trainable variables that the compiled functions read.
+
+The objective can also be compiled whole by XLA (:meth:`Rollout.xla_policy_loss`): its
+graph then avoids the operations XLA lacks on CPU, the horizon is a constant of the
+trace, and :meth:`Rollout.refresh` with ``pad=True`` pads the factorisation to a few fixed
+sizes (:func:`pilco.moments.bucket_size`), so that XLA compiles once per size bucket
+rather than once per data size.
 """
 from __future__ import annotations
 
@@ -72,6 +78,7 @@ class Rollout(gpflow.base.Module):
                  control_dim: int, policy_input_noise: bool, horizon: int, m_init, S_init):
         super().__init__()
         self.horizon = tf.Variable(horizon, trainable=False, dtype=tf.int32, name="horizon")
+        self._horizon = int(horizon)  # the same, for traces that need it as a constant
         self.layout = layout
         self.state_dim = D = layout.state_dim
         self.m_init = tf.Variable(m_init, shape=[None, D], trainable=False, name="m_init")
@@ -135,9 +142,22 @@ class Rollout(gpflow.base.Module):
         self._reward = value
         self.retrace()
 
-    def refresh(self, dynamics_model) -> None:
-        """Factorise ``dynamics_model`` (an :class:`MGPR`) for the compiled functions."""
+    def set_horizon(self, horizon: int) -> bool:
+        """Set the objective's horizon (checked by the caller); True if it changed, which
+        makes the XLA objective's trace stale (its horizon is a constant of the trace)."""
+        self.horizon.assign(horizon)
+        changed = int(horizon) != self._horizon
+        self._horizon = int(horizon)
+        return changed
+
+    def refresh(self, dynamics_model, pad: bool = False) -> None:
+        """Factorise ``dynamics_model`` (an :class:`MGPR`) for the compiled functions;
+        with ``pad``, padded to :func:`pilco.moments.bucket_size` centres by points of
+        zero weight (the predictions are the same; see :mod:`pilco.moments.compiled`)."""
         factorization = dynamics_model.factorize()
+        if pad:
+            n = int(factorization.centers.shape[0])
+            factorization = moments.pad_factorization(factorization, moments.bucket_size(n))
         self._centers.assign(factorization.centers)
         self._beta.assign(factorization.beta)
         self._inverse.assign(factorization.iK)
@@ -203,10 +223,11 @@ class Rollout(gpflow.base.Module):
         s_next = s + Sd + cov_xd + tf.transpose(cov_xd)
         return m_next, 0.5 * (s_next + tf.transpose(s_next))
 
-    def _total_reward(self, m0, s0, horizon):
+    def _total_reward(self, m0, s0, horizon, maximum_iterations=None):
         """Sum of expected rewards of steps 1..H and the final state, in one graph.
 
-        Shapes: m0 [1, D], s0 [D, D], horizon scalar int32 -> m_H [1, D], s_H [D, D],
+        Shapes: m0 [1, D], s0 [D, D], horizon scalar int32 (or a Python int, with
+        ``maximum_iterations`` the same int for XLA) -> m_H [1, D], s_H [D, D],
         total [1, 1].
         """
         dynamics = self.dynamics()
@@ -223,6 +244,7 @@ class Rollout(gpflow.base.Module):
             (tf.constant(0), m0, s0, tf.zeros([1, 1], dtype=m0.dtype)),
             shape_invariants=(tf.TensorShape([]), tf.TensorShape([1, D]),
                               tf.TensorShape([D, D]), tf.TensorShape([1, 1])),
+            maximum_iterations=maximum_iterations,
         )
         return m, s, total
 
@@ -246,6 +268,23 @@ class Rollout(gpflow.base.Module):
         total = totals[0]
         for t in totals[1:]:
             total = total + t
+        return -total[0, 0]
+
+    def xla_policy_loss(self):
+        """:meth:`policy_loss` for a function compiled by XLA (``jit_compile=True``): traced
+        inside :func:`pilco.moments.xla_compatible`, the horizon loop with a constant trip
+        count (the horizon at trace time: a new horizon needs a new trace, see
+        :meth:`set_horizon`). The same value up to rounding."""
+        m0 = tf.convert_to_tensor(self.m_init)
+        s0 = tf.convert_to_tensor(self.S_init)
+        D = self.state_dim
+        H = self._horizon
+        total = None
+        with moments.xla_compatible():
+            for i in range(self.num_tasks):
+                r = self._total_reward(tf.reshape(m0[i], [1, D]), s0[i], H,
+                                       maximum_iterations=H)[2]
+                total = r if total is None else total + r
         return -total[0, 0]
 
     def _trajectory(self, m0, s0, horizon):

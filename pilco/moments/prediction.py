@@ -13,6 +13,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 import tensorflow as tf
 
+from .compiled import in_xla_compatible, logdet_spd
 from .factorization import Factorization
 from .pairs import (_pair_exponent_factors, _pair_second_moments, pair_groups, pair_weights,
                     symmetric_pairs)
@@ -27,10 +28,12 @@ def _inv_logdet(A: tf.Tensor):
     Shapes: A [..., D, D] -> (A^-1 [..., D, D], log det A [...]). The backward pass
     reuses the inverse for both outputs (d log det A = A^-1 : dA). (An inverse through
     one Cholesky factorisation measured slower than TensorFlow's batched LU inverse
-    for these small matrices on CPU.)
+    for these small matrices on CPU.) Traced inside
+    :func:`~pilco.moments.compiled.xla_compatible`, the log-determinant comes from a
+    Cholesky factor instead (XLA has no ``slogdet`` on CPU).
     """
     Ainv = tf.linalg.inv(A)
-    logdet = tf.linalg.slogdet(A)[1]
+    logdet = logdet_spd(A) if in_xla_compatible() else tf.linalg.slogdet(A)[1]
 
     def grad(g_inv, g_logdet):
         gA = -tf.matmul(Ainv, tf.matmul(g_inv, Ainv), transpose_a=True)

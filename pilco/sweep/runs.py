@@ -39,11 +39,11 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from pilco.experiment.signals import signal_handler
 from pilco.files import write_json_atomic
-from pilco.runtime import thread_environment
+from pilco.runtime import XLA_CACHE_VARIABLE, thread_environment
 
 __all__ = ["RunSpec", "RunFailed", "SweepOutcome", "SUMMARY", "RUN_RECORD", "ATTEMPTS",
            "PROGRESS", "read_json", "summary_complete", "finished_summary", "saved_episodes",
-           "execute_run", "execute"]
+           "run_environment", "execute_run", "execute"]
 
 logger = logging.getLogger(__name__)
 
@@ -214,6 +214,18 @@ def _stop(proc: subprocess.Popen, grace: float = 5.0) -> None:
         proc.wait()
 
 
+def run_environment(threads: int, directory: str,
+                    base: Optional[Mapping[str, str]] = None) -> Dict[str, str]:
+    """The environment of the run in ``directory`` (``OUTPUT/SETTING/seed-S``): the
+    thread pools of :func:`~pilco.runtime.thread_environment`, and ``PILCO_XLA_CACHE``
+    set to ``OUTPUT/xla-cache`` unless ``base`` names a cache already, so that the runs
+    of a sweep that compile with XLA share one compilation cache."""
+    env = thread_environment(threads, base)
+    sweep_output = os.path.dirname(os.path.dirname(os.path.abspath(directory)))
+    env.setdefault(XLA_CACHE_VARIABLE, os.path.join(sweep_output, "xla-cache"))
+    return env
+
+
 def execute_run(spec: RunSpec, threads: int = 1, resume_saved: bool = False
                 ) -> Dict[str, Any]:
     """Run ``spec``'s process with ``threads`` threads and return ``{"summary",
@@ -243,11 +255,12 @@ def execute_run(spec: RunSpec, threads: int = 1, resume_saved: bool = False
     if saved is not None:
         # the flags given again win over the saved ones, so the run keeps this setting
         command += ["--resume", directory]
+    env = run_environment(threads, directory)
     out_path = os.path.join(directory, "stdout.log")
     err_path = os.path.join(directory, "stderr.log")
     with open(out_path, "wb") as out, open(err_path, "wb") as err:
         proc = subprocess.Popen(command, stdout=out, stderr=err,
-                                stdin=subprocess.DEVNULL, env=thread_environment(threads),
+                                stdin=subprocess.DEVNULL, env=env,
                                 preexec_fn=functools.partial(_die_with_parent, os.getpid())
                                 if sys.platform == "linux" else None)
         try:

@@ -59,7 +59,7 @@ class Task:
         """The settings of command line ``argv`` (``--resume`` restores the saved ones,
         :func:`~pilco.tasks.settings.parse_settings`), checked by :meth:`check`; sets up
         logging at ``--log-level`` and the TensorFlow threads."""
-        from ..runtime import configure_logging, configure_threads
+        from ..runtime import configure_logging, configure_threads, use_xla_cache
 
         settings = parse_settings(self.settings, argv, description=self.description,
                                   presets=self.presets, prog=self.prog)
@@ -69,6 +69,8 @@ class Task:
             self.parser().error(str(err))
         configure_logging(settings.log_level)
         configure_threads()
+        if settings.policy_compiler == "xla":
+            use_xla_cache()
         return settings
 
     def check(self, settings: RunSettings) -> RunSettings:
@@ -96,7 +98,7 @@ class Task:
             model_min_rel_improvement=s.model_min_rel_improvement,
             retrain_unchanged_model=s.retrain_unchanged_model,
             policy_iters=s.policy_iters, policy_restarts=s.policy_restarts,
-            policy_method=s.policy_optimizer,
+            policy_method=s.policy_optimizer, policy_compiler=s.policy_compiler,
             policy_min_rel_improvement=s.policy_min_rel_improvement,
             policy_patience=s.policy_patience, policy_early_stop=s.policy_early_stop,
             policy_restart_when=s.policy_restart_when,

@@ -158,6 +158,11 @@ class RunSettings:
     policy_optimizer: str = setting(
         "L-BFGS-B", "policy optimiser (BFGS: dense update, as the MATLAB release)",
         kind=str.upper, choices=("L-BFGS-B", "BFGS"), group="learning")
+    policy_compiler: str = setting(
+        "graph", "compile the policy objective and its gradient as a TensorFlow graph, or "
+        "whole by XLA (faster on small problems; compiled once per data-size bucket and "
+        "cached on disk: $PILCO_XLA_CACHE, default ~/.cache/pilco/xla)",
+        choices=("graph", "xla"), group="learning")
     policy_min_rel_improvement: Optional[float] = setting(
         None, "stop a policy optimisation once its predicted return grew by less than this "
         "fraction of it over the last --policy-patience iterations (0 or None: never)",
