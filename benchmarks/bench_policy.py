@@ -45,15 +45,16 @@ import numpy as np
 from port_policy import peak_memory_mb  # same directory; standard library only
 
 
-def build(problem: str, seed: int = 0, cartpole_data: int = 40):
-    """The agent of one benchmark problem, with GP hyperparameters fitted to its data."""
+def build(problem: str, seed: int = 0, cartpole_data: int = 40, reacher_data: int = 100):
+    """The agent of one benchmark problem, its GP hyperparameters set from its data;
+    ``cartpole_data`` / ``reacher_data`` transitions (``bench_limit.py`` varies them)."""
     from pilco.controllers import RbfController, squash_sat, squash_sin
     from pilco.models import PILCO
     from pilco.rewards import CartPoleReward, ExponentialReward
 
     rng = np.random.default_rng(seed)
     if problem == "reacher":
-        D, U, N, H, nb = 10, 7, 100, 50, 50
+        D, U, N, H, nb = 10, 7, reacher_data, 50, 50
         A = rng.standard_normal((D + U, D)) / np.sqrt(D + U)
         X = np.concatenate([rng.uniform(-1, 1, (N, D)), rng.uniform(-0.1, 0.1, (N, U))], 1)
         Y = 0.1 * np.tanh(X @ A) + 1e-3 * rng.standard_normal((N, D))
