@@ -32,6 +32,7 @@ EXPECTED_REQUIREMENTS = {
     "02_reacher.ipynb": ["mujoco", "gymnasium_robotics"],
     "03_damaged_reacher.ipynb": ["mujoco", "gymnasium_robotics"],
     "04_success_rates.ipynb": [],
+    "05_multi_target_reacher.ipynb": ["mujoco", "gymnasium_robotics"],
 }
 FAST_SWITCH = 'os.environ.get("PILCO_NOTEBOOK_FAST", "0") == "1"'
 
