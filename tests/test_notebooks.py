@@ -96,7 +96,7 @@ def test_stored_notebook_is_executed_in_order_without_errors(name):
 def test_stored_notebook_shows_its_figures(name):
     cells = _code_cells(_load(name))
     drawing = [c for c in cells if "plt.show()" in _source(c)]
-    assert drawing, f"{name} draws no figure"      # all three notebooks have figures
+    assert drawing, f"{name} draws no figure"      # every notebook has figures
     pngs = [o for c in cells for o in c["outputs"] if "image/png" in o.get("data", {})]
     assert len(pngs) >= len(drawing)
 

@@ -81,3 +81,14 @@ def test_a_tiny_run_tests_its_policy_on_the_held_out_targets(tmp_path):
     assert any(p.endswith("targets.png") for p in paths)
     with open(os.path.join(out, "summary.json"), encoding="utf-8") as f:
         assert json.load(f)["test_steps"] == summary["test_steps"]
+    # the diagnosis of the learned episode: predicted from the start of its own target,
+    # the run's policy rerun on the episode's target (the same distances), the context
+    # dimensions out of the one-step coverage
+    from pilco.diagnose import diagnose, open_run
+
+    result = diagnose(open_run(out), restarts=0)
+    assert result["verdict"]
+    one_step = result["model"]["one_step"]
+    assert all(np.isfinite(one_step["rms_z_per_dim"]))
+    np.testing.assert_array_equal(np.asarray(one_step["coverage_per_dim"])[list(CONTEXT)], 1.0)
+    assert result["reconstruction"]["rerun_distance_error"] == pytest.approx(0.0, abs=1e-9)
