@@ -28,7 +28,6 @@ import platform
 import subprocess
 import sys
 import tempfile
-import time
 
 import numpy as np
 
@@ -38,9 +37,7 @@ DEFAULT_SIZES = {"cartpole": [40, 80, 160, 280], "reacher": [50, 100, 150]}
 
 def _measure(problem: str, size: int, compiler: str, repeats: int) -> dict:
     """In this process: first call and per-call seconds of one compiled objective."""
-    import gpflow
-
-    from bench_policy import build
+    from bench_policy import _time_loss_and_gradient, build
 
     agent = (build(problem, cartpole_data=size) if problem == "cartpole"
              else build(problem, reacher_data=size))
@@ -49,20 +46,9 @@ def _measure(problem: str, size: int, compiler: str, repeats: int) -> dict:
     rollout.refresh(agent.mgpr, pad=xla)
     loss = rollout.xla_policy_loss if xla else rollout.policy_loss
     args = dict(autograph=False, jit_compile=True) if xla else dict(autograph=False)
-    variables = agent.controller.trainable_variables
-    opt = gpflow.optimizers.Scipy()
-    fn = opt.eval_func(loss, variables, tf_fun_args=args, compile=True)
-    x0 = opt.initial_parameters(variables).numpy()
-    t0 = time.perf_counter()
-    value, _ = fn(x0)
-    first = time.perf_counter() - t0
-    seconds = []
-    for i in range(repeats):
-        x = x0 + 1e-3 * np.random.default_rng(i).standard_normal(x0.shape)
-        t0 = time.perf_counter()
-        fn(x)
-        seconds.append(time.perf_counter() - t0)
-    return {"value": float(value), "first_call_seconds": first,
+    value, first, seconds = _time_loss_and_gradient(
+        loss, agent.controller.trainable_variables, repeats, args)
+    return {"value": value, "first_call_seconds": first,
             "seconds_per_call": float(np.median(seconds)),
             "centres": int(rollout._centers.numpy().shape[0])}
 
