@@ -75,7 +75,9 @@ MAX_BYTES = 200_000
 
 EPISODE_FIELDS = ("episode", "random", "steps", "min_distance", "final_distance",
                   "steps_to_target")
-ADAPTATION_FIELDS = ("damage_at_episode", "episodes_to_recover")
+#: task-specific summary fields kept per run: the adaptation's damage and recovery, the
+#: multi-target reacher's held-out test (steps per test target, how many within the rule)
+TASK_FIELDS = ("damage_at_episode", "episodes_to_recover", "test_steps", "test_reached")
 RUN_FIELDS = ("setting", "seed", "success", "solved", "solved_at_episode", "seconds",
               "episodes", "distances")
 
@@ -162,7 +164,7 @@ def trim_run(summary: Mapping[str, Any], setting: str) -> Dict[str, Any]:
     provenance = trim_provenance(summary.get("provenance"))
     if provenance is not None:
         run["provenance"] = provenance
-    for key in ADAPTATION_FIELDS:
+    for key in TASK_FIELDS:
         if key in summary:
             run[key] = summary[key]
     return run
