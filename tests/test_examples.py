@@ -27,7 +27,7 @@ REACHER = ["--horizon", "6", *TINY, "--no-render"]
 TIMEOUT = 600
 
 EPISODE_KEYS = {"episode", "random", "steps", "cost", "final_distance", "min_distance",
-                "steps_to_target", "seconds"}
+                "steps_to_target", "seconds", "policy_evaluations"}
 SUMMARY_KEYS = {"task", "seed", "solved", "solved_at_episode", "episodes", "seconds",
                 "complete", "success", "distances", "provenance"}
 PHASE_KEYS = {"interaction", "model", "policy"}
@@ -129,8 +129,10 @@ def _check_summary(s, task, episodes, extra=()):
         assert all(isinstance(v, float) for v in e["seconds"].values())
         if e["random"]:
             assert e["seconds"]["model"] == 0.0 and e["seconds"]["policy"] == 0.0
+            assert e["policy_evaluations"] == 0
         else:
             assert e["seconds"]["policy"] > 0.0
+            assert isinstance(e["policy_evaluations"], int) and e["policy_evaluations"] >= 1
     total = sum(e["seconds"]["policy"] for e in s["episodes"])
     assert s["seconds"]["policy"] == pytest.approx(total)
 

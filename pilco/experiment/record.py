@@ -148,8 +148,10 @@ class RunRecord:
         self.episodes.append(episode)
         self.predictions.append(prediction)
         rec = episode_record(episode, len(self.episodes), seconds, self.config)
-        if policy_evaluations is not None:
-            rec["policy_evaluations"] = int(policy_evaluations)
+        # objective + gradient evaluations of the episode's policy search (0 for a random
+        # episode; None when the agent does not count them)
+        rec["policy_evaluations"] = (0 if episode.random else None) \
+            if policy_evaluations is None else int(policy_evaluations)
         self.records.append(rec)
         for p in PHASES:
             self.seconds[p] += float(seconds.get(p, 0.0))
