@@ -82,7 +82,7 @@ def bucket_size(n: int) -> int:
     data grow over a factor 2 meets about four sizes, and padding adds at most a quarter.
 
     >>> [bucket_size(n) for n in (5, 40, 50, 100, 120, 150, 280)]
-    [8, 40, 56, 112, 128, 160, 288]
+    [8, 40, 56, 112, 128, 160, 320]
     """
     n = int(n)
     if n < 1:
