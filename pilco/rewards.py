@@ -45,19 +45,13 @@ def _exp_reward_moments(m, s, W, t):
     # W (I + s W)^-1, written through a solve with the transposed system
     iSpW = tf.transpose(tf.linalg.solve(tf.transpose(eye + SW), W))
     mean = tf.exp(-0.5 * tf.matmul(tf.matmul(d, iSpW), d, transpose_b=True)) * tf.exp(
-        -0.5 * _logdet(eye + SW)
+        -0.5 * compiled.log_determinant(eye + SW)
     )
     i2SpW = tf.transpose(tf.linalg.solve(tf.transpose(eye + 2.0 * SW), W))
     r2 = tf.exp(-tf.matmul(tf.matmul(d, i2SpW), d, transpose_b=True)) * tf.exp(
-        -0.5 * _logdet(eye + 2.0 * SW)
+        -0.5 * compiled.log_determinant(eye + 2.0 * SW)
     )
     return mean, r2 - mean * mean
-
-
-def _logdet(A):
-    """log det of ``I + s W`` (positive): ``slogdet``, or a QR factorisation in a graph
-    traced for XLA (:func:`pilco.moments.compiled.xla_compatible`)."""
-    return compiled.logdet(A) if compiled.in_xla_compatible() else tf.linalg.slogdet(A)[1]
 
 
 class _Reward(gpflow.base.Module):

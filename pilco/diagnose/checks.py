@@ -75,8 +75,8 @@ def one_step_check(agent, episode: Episode, geometry: Optional[CostGeometry],
     left out of the overall coverage."""
     X, Y = episode.transitions()
     mean, var = agent.one_step_prediction(X)
-    predicted = [d for d in range(Y.shape[1])
-                 if d not in set(getattr(agent, "context_indices", ()))]
+    context = set(getattr(agent, "context_indices", ()))
+    predicted = [d for d in range(Y.shape[1]) if d not in context]
     sd = np.sqrt(var)
     z = np.divide(Y - mean, sd, out=np.zeros_like(Y), where=sd > 0)
     within = np.abs(z) <= thresholds.z

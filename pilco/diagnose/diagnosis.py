@@ -17,8 +17,8 @@ from typing import Any, Dict, Optional
 import numpy as np
 
 from ..files import write_json_atomic
-from .checks import (episode_task, multi_step_check, objective_check, one_step_check, open_loop_check,
-                     optimiser_check)
+from .checks import (episode_task, multi_step_check, objective_check, one_step_check,
+                     open_loop_check, optimiser_check)
 from .geometry import cost_geometry
 from .replay import agent_of_episode
 from .thresholds import Thresholds

@@ -407,7 +407,7 @@ class PILCO(gpflow.base.Module):
         With ``jit_compile`` the objective and its gradient are compiled whole by XLA
         (:meth:`pilco.models.rollout.Rollout.xla_policy_loss`; the dynamics model padded to
         a few fixed sizes, so a run compiles once per size bucket, and a persistent
-        compilation cache, see :func:`pilco.runtime.xla_cache_environment`, makes later
+        compilation cache, see :func:`pilco.runtime.use_xla_cache`, makes later
         runs start warm). It removes TensorFlow's per-operation overhead, which dominates
         small problems (the cart-pole); the values agree with the graph's up to rounding,
         so runs take other paths.

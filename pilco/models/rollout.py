@@ -59,6 +59,14 @@ def _right(A, pick):
     return A if pick is None else tf.matmul(A, pick)
 
 
+def _negative_sum(totals):
+    """Minus the sum of the tasks' totals (a list of [1, 1] tensors), as a scalar."""
+    total = totals[0]
+    for t in totals[1:]:
+        total = total + t
+    return -total[0, 0]
+
+
 class Rollout(gpflow.base.Module):
     """Moment-matched multi-step prediction of a controller, dynamics model and reward.
 
@@ -248,44 +256,37 @@ class Rollout(gpflow.base.Module):
         )
         return m, s, total
 
-    def task_totals(self):
+    def task_totals(self, xla: bool = False):
         """Total expected reward of ``horizon`` steps from each start distribution
         ``N(m_init[i], S_init[i])``, with the dynamics model of the last refresh: a list
         of T tensors [1, 1]. Each task's horizon is its own call of the compiled
-        :meth:`total_reward` (one trace serves all, the tasks have the same shapes)."""
+        :meth:`total_reward` (one trace serves all, the tasks have the same shapes); with
+        ``xla``, of :meth:`_total_reward` traced inside :func:`pilco.moments.xla_compatible`
+        with the horizon as a constant trip count (see :meth:`xla_policy_loss`)."""
         m0 = tf.convert_to_tensor(self.m_init)
         s0 = tf.convert_to_tensor(self.S_init)
-        horizon = tf.convert_to_tensor(self.horizon)
         D = self.state_dim
-        return [self.total_reward(tf.reshape(m0[i], [1, D]), s0[i], horizon)[2]
-                for i in range(self.num_tasks)]
+        starts = [(tf.reshape(m0[i], [1, D]), s0[i]) for i in range(self.num_tasks)]
+        if xla:
+            H = self._horizon
+            with moments.xla_compatible():
+                return [self._total_reward(m, s, H, maximum_iterations=H)[2]
+                        for m, s in starts]
+        horizon = tf.convert_to_tensor(self.horizon)
+        return [self.total_reward(m, s, horizon)[2] for m, s in starts]
 
     def policy_loss(self):
         """The policy objective (a scalar): minus the sum over the T start distributions
         of the total expected reward of ``horizon`` steps. Traced inside the optimiser's
         compiled function, the whole sum and its gradient are one graph."""
-        totals = self.task_totals()
-        total = totals[0]
-        for t in totals[1:]:
-            total = total + t
-        return -total[0, 0]
+        return _negative_sum(self.task_totals())
 
     def xla_policy_loss(self):
         """:meth:`policy_loss` for a function compiled by XLA (``jit_compile=True``): traced
         inside :func:`pilco.moments.xla_compatible`, the horizon loop with a constant trip
         count (the horizon at trace time: a new horizon needs a new trace, see
         :meth:`set_horizon`). The same value up to rounding."""
-        m0 = tf.convert_to_tensor(self.m_init)
-        s0 = tf.convert_to_tensor(self.S_init)
-        D = self.state_dim
-        H = self._horizon
-        total = None
-        with moments.xla_compatible():
-            for i in range(self.num_tasks):
-                r = self._total_reward(tf.reshape(m0[i], [1, D]), s0[i], H,
-                                       maximum_iterations=H)[2]
-                total = r if total is None else total + r
-        return -total[0, 0]
+        return _negative_sum(self.task_totals(xla=True))
 
     def _trajectory(self, m0, s0, horizon):
         """States 0..H and their reward moments: M [H+1, D], S [H+1, D, D], R, Rv [H+1]."""

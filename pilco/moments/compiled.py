@@ -28,8 +28,8 @@ import tensorflow as tf
 
 from .factorization import Factorization
 
-__all__ = ["xla_compatible", "in_xla_compatible", "logdet_spd", "logdet", "bucket_size",
-           "pad_factorization"]
+__all__ = ["xla_compatible", "in_xla_compatible", "log_determinant", "logdet_spd", "logdet",
+           "bucket_size", "pad_factorization"]
 
 _mode = threading.local()
 
@@ -74,6 +74,16 @@ def logdet(A: tf.Tensor):
         return g[..., None, None] * tf.linalg.adjoint(tf.linalg.inv(A))
 
     return value, grad
+
+
+def log_determinant(A: tf.Tensor, spd: bool = False) -> tf.Tensor:
+    """log det of square matrices with a positive determinant, as the graph being traced
+    needs it: TensorFlow's ``slogdet`` (the default path, unchanged), or inside
+    :func:`xla_compatible` :func:`logdet_spd` (``spd``: symmetric positive definite) or
+    :func:`logdet`. Shapes: A [..., D, D] -> [...]."""
+    if not in_xla_compatible():
+        return tf.linalg.slogdet(A)[1]
+    return logdet_spd(A) if spd else logdet(A)
 
 
 def bucket_size(n: int) -> int:

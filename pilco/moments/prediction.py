@@ -13,7 +13,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 import tensorflow as tf
 
-from .compiled import in_xla_compatible, logdet_spd
+from .compiled import log_determinant
 from .factorization import Factorization
 from .pairs import (_pair_exponent_factors, _pair_second_moments, pair_groups, pair_weights,
                     symmetric_pairs)
@@ -33,7 +33,7 @@ def _inv_logdet(A: tf.Tensor):
     Cholesky factor instead (XLA has no ``slogdet`` on CPU).
     """
     Ainv = tf.linalg.inv(A)
-    logdet = logdet_spd(A) if in_xla_compatible() else tf.linalg.slogdet(A)[1]
+    logdet = log_determinant(A, spd=True)
 
     def grad(g_inv, g_logdet):
         gA = -tf.matmul(Ainv, tf.matmul(g_inv, Ainv), transpose_a=True)
