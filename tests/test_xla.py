@@ -239,3 +239,61 @@ def test_a_sweeps_runs_share_a_cache_in_its_output_folder(tmp_path):
     assert env["TF_NUM_INTRAOP_THREADS"] == "1"
     named = run_environment(1, str(run_dir), base={runtime.XLA_CACHE_VARIABLE: "/c"})
     assert named[runtime.XLA_CACHE_VARIABLE] == "/c"
+
+
+def test_align_graph_names_makes_the_next_name_a_multiple_of_the_alignment():
+    from tensorflow.python.framework import ops
+
+    nxt = compiled.align_graph_names(4096)
+    assert nxt % 4096 == 0
+    assert ops.uid() == nxt
+    for bad in (0, -3, 2.0, True):
+        with pytest.raises(ValueError, match="alignment"):
+            compiled.align_graph_names(bad)
+
+
+_PROBE = """
+import os, sys
+import numpy as np
+import tensorflow as tf
+from pilco.models.policy_search import GuardedScipy
+for _ in range(int(sys.argv[1])):  # another history of traces before the objective's
+    tf.function(lambda x: x + 1.0).get_concrete_function(tf.TensorSpec([], tf.float64))
+w = tf.Variable([0.3, -0.2], dtype=tf.float64)
+def loss():
+    body = lambda i, y: (i + 1, y + tf.reduce_sum((w - 0.1 * tf.cast(i, tf.float64)) ** 2))
+    return tf.while_loop(lambda i, y: i < 4, body, (0, tf.constant(0.0, tf.float64)),
+                         maximum_iterations=4)[1]
+from tensorflow.python.framework import ops
+opt = GuardedScipy()
+names = []
+for _ in range(2):  # traced once: the second minimize neither traces nor aligns again
+    opt.minimize(loss, [w], options=dict(maxiter=3), tf_fun_args=dict(jit_compile=True))
+    names.append(ops.uid())
+print(len(os.listdir(os.environ["CACHE"])), opt.evaluations, opt.failures,
+      names[1] - names[0])
+"""
+
+
+def test_runs_with_other_trace_histories_load_each_others_xla_programs(tmp_path):
+    """The persistent cache is keyed on the traced program's names: the policy search
+    aligns TensorFlow's name counter before its XLA trace, so a second process whose
+    history created other graphs finds the first one's program instead of compiling."""
+    import subprocess
+    import sys
+
+    cache = tmp_path / "cache"
+    env = dict(os.environ, CACHE=str(cache), TF_CPP_MIN_LOG_LEVEL="3",
+               TF_XLA_FLAGS=f"--tf_xla_persistent_cache_directory={cache}",
+               PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    counts = []
+    for history in (2, 37):
+        out = subprocess.run([sys.executable, "-c", _PROBE, str(history)], env=env,
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr[-2000:]
+        files, evaluations, failures, names = map(int, out.stdout.split())
+        assert evaluations > 2 and failures == 0
+        assert names < compiled.NAME_ALIGNMENT  # not aligned again for the second run
+        counts.append(files)
+    assert counts[0] >= 1
+    assert counts[1] == counts[0], "the second process compiled its own program"

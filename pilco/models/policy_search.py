@@ -13,6 +13,7 @@ from typing import Callable, List, Optional
 import numpy as np
 import tensorflow as tf
 
+from ..moments.compiled import align_graph_names
 from ..snapshots import Stalled, TrackingScipy, restore, snapshot
 
 __all__ = ["GuardedScipy", "search_policy"]
@@ -48,6 +49,11 @@ class GuardedScipy(TrackingScipy):
 
     def eval_func(self, closure, variables, tf_fun_args, compile=True,
                   allow_unused_variables=False):
+        if compile and tf_fun_args.get("jit_compile") and self._will_trace(
+                closure, variables, tf_fun_args, allow_unused_variables):
+            # XLA's persistent cache is keyed on the traced program's names: the same
+            # names in every run (pilco.moments.compiled.align_graph_names)
+            align_graph_names()
         inner = super().eval_func(closure, variables, tf_fun_args, compile=compile,
                                   allow_unused_variables=allow_unused_variables)
 
@@ -68,6 +74,15 @@ class GuardedScipy(TrackingScipy):
             return loss, grad
 
         return guarded
+
+    def _will_trace(self, closure, variables, tf_fun_args, allow_unused_variables) -> bool:
+        """Whether the function GPflow's ``eval_func`` is about to return has not been
+        traced yet (GPflow keeps one per closure, variables and arguments; if its cache
+        is not found, True)."""
+        key = (closure, tuple(id(v) for v in variables), frozenset(tf_fun_args.items()),
+               allow_unused_variables)
+        function = getattr(self, "compile_cache", {}).get(key)
+        return function is None or function.experimental_get_tracing_count() == 0
 
     def restore_best(self, variables) -> bool:
         """Assign the best point evaluated so far to ``variables``; False if there is none."""
