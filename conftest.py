@@ -20,9 +20,6 @@ this run ignores those outputs and discards its own. This file
 * skips a notebook whose metadata lists Python modules that are not installed
   (``"pilco": {"requires": [...]}``; the reacher notebooks need mujoco and
   gymnasium_robotics);
-* gives every test its pytest-xdist group (``pytest.ini`` runs the suite on up to 4
-  worker processes with ``--dist loadgroup``): a module's tests stay on one worker, and so
-  do the notebooks and the modules that start Ray;
 * fails a notebook whose execution changed anything in ``notebooks/``, and refuses
   nbmake's ``--overwrite`` (it would store the FAST outputs, uncleaned, in place of the
   full ones: ``python notebooks/execute.py`` stores outputs).
@@ -80,26 +77,9 @@ def pytest_configure(config):
             "cleaned outputs")
 
 
-#: test modules that start Ray (local instances, a ``ray start`` head): one xdist worker
-#: runs them one after another, so that two Ray clusters of the tests never meet
-RAY_MODULES = frozenset({"test_sweep_ray.py", "test_sweep_faults.py", "test_hard_kill.py"})
-
-
-def xdist_group(item) -> str:
-    """The group of tests that one pytest-xdist worker runs together (``--dist loadgroup``
-    in pytest.ini): a test module's tests, so its module fixtures run once; every notebook
-    (they share ``notebooks/``, whose files the run checks unchanged); the Ray modules."""
-    if _is_notebook(item):
-        return "notebooks"
-    if item.path.name in RAY_MODULES:
-        return "ray"
-    return str(item.path)
-
-
 def pytest_collection_modifyitems(config, items):
     explicit_timeout = config.getoption("timeout", None) is not None
     for item in items:
-        item.add_marker(pytest.mark.xdist_group(xdist_group(item)))
         if not _is_notebook(item):
             continue
         if not explicit_timeout:
