@@ -49,6 +49,7 @@ setup(
             "imageio>=2.20",
             "pytest>=7",
             "pytest-timeout>=2.1",
+            "pytest-xdist>=3.2",
             "nbmake>=1.4",
             "ipykernel>=6",
         ],
