@@ -254,8 +254,8 @@ def test_align_graph_names_makes_the_next_name_a_multiple_of_the_alignment():
 
 _PROBE = """
 import os, sys
-import numpy as np
 import tensorflow as tf
+from tensorflow.python.framework import ops
 from pilco.models.policy_search import GuardedScipy
 for _ in range(int(sys.argv[1])):  # another history of traces before the objective's
     tf.function(lambda x: x + 1.0).get_concrete_function(tf.TensorSpec([], tf.float64))
@@ -264,7 +264,6 @@ def loss():
     body = lambda i, y: (i + 1, y + tf.reduce_sum((w - 0.1 * tf.cast(i, tf.float64)) ** 2))
     return tf.while_loop(lambda i, y: i < 4, body, (0, tf.constant(0.0, tf.float64)),
                          maximum_iterations=4)[1]
-from tensorflow.python.framework import ops
 opt = GuardedScipy()
 names = []
 for _ in range(2):  # traced once: the second minimize neither traces nor aligns again

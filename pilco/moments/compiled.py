@@ -148,6 +148,7 @@ def align_graph_names(alignment: int = NAME_ALIGNMENT) -> int:
     from tensorflow.python.framework import ops  # the counter itself has no public API
 
     uid = ops.uid()
-    for _ in range((-uid - 1) % alignment):
+    skip = (-uid - 1) % alignment  # names to hand out so that the next is aligned
+    for _ in range(skip):
         ops.uid()
-    return uid + 1 + (-uid - 1) % alignment
+    return uid + 1 + skip
