@@ -15,10 +15,13 @@ Usage::
     python benchmarks/bench_limit.py --json out.json --repeats 7
 
 Each thread setting runs in a fresh process of its own (TensorFlow fixes its thread
-pools at its first operation): ``1`` is the tasks' setting (``TF_NUM_INTRAOP_THREADS=1``,
-:func:`pilco.experiment.cli.configure_threads`; the inter-op pool keeps every CPU, so
-the objective's independent groups of output pairs still run side by side; numpy's BLAS
-also on one thread), ``default`` is TensorFlow's and numpy's defaults (every CPU).
+pools at its first operation): ``1`` is a task's own setting (``TF_NUM_INTRAOP_THREADS=1``,
+:func:`pilco.runtime.configure_threads`; the inter-op pool keeps every CPU, so the
+objective's independent groups of output pairs run side by side and one evaluation can
+keep more than one core busy; numpy's BLAS on one thread), ``sweep`` a sweep's run on one
+CPU (one intra-op and one inter-op thread, :func:`pilco.runtime.thread_environment`: one
+group of output pairs, everything on one core), ``default`` TensorFlow's and numpy's
+defaults (every CPU).
 
 How the flops are counted: the objective + gradient is traced as one ``tf.function``
 (with the dynamics GP's data and the start distributions in variables of static shape,
@@ -37,14 +40,15 @@ against an analytic count of the dominant term (the dynamics GP's n x n pair blo
 Columns of the table:
 
 - ``task``, ``N``: the problem and its number of transitions (the dynamics GP's n);
-- ``threads``: ``1`` (one intra-op thread, the tasks' setting) or ``default``;
+- ``threads``: ``1`` (one intra-op thread, a task's setting), ``sweep`` (one thread in
+  all, a sweep's run on one CPU) or ``default``;
 - ``MFLOP``: float64 operations of one objective + gradient, in millions;
 - ``s``: seconds per objective + gradient, the fastest of ``--repeats`` calls after a
   warm-up call (which traces and compiles);
 - ``GFLOP/s``: MFLOP / s / 1000, the achieved rate;
 - ``%peak1``, ``%peak2``: that rate as a percentage of the machine's float64 matrix-product
   peak on 1 and on 2 threads (the better of TensorFlow's and numpy's 2000 x 2000 product,
-  measured in the ``1`` and ``default`` processes);
+  measured in the ``1`` (or ``sweep``) and ``default`` processes);
 - ``ops``: nodes TensorFlow executes per evaluation, counted in the graph as it runs
   (after Grappler's optimisation, which inlines the function calls, removes some
   operations and lowers each loop to control-flow nodes, one ``Switch``, ``Merge`` and
@@ -630,13 +634,16 @@ COUNTED = ("flops", "graph_operations", "bytes", "floor_flops", "flops_by_type",
 
 
 def share_counts(settings: Dict[str, Dict[str, object]]) -> None:
-    """Copy the counted fields of the first setting's rows into the other settings' rows
-    of the same problem and size (counted once: the graph is the same, since every
-    setting keeps TensorFlow's default inter-op threads and so the same pair groups)."""
+    """Copy the counted fields of the first setting's rows into the rows of the settings
+    not counted (``--_no-count``) of the same problem and size: their graph is the same,
+    since they keep TensorFlow's default inter-op threads and so the same pair groups
+    (the ``sweep`` setting, with one group, is counted in its own process)."""
     first, *others = settings.values()
     by_key = {(r["problem"], r["N"]): r for r in first["rows"]}
     for res in others:
         for r in res["rows"]:
+            if "flops" in r:
+                continue
             source = by_key[(r["problem"], r["N"])]
             if source["pair_groups"] != r["pair_groups"]:
                 raise RuntimeError(f"{r['problem']} N={r['N']}: the settings' graphs differ "
@@ -651,6 +658,8 @@ def share_counts(settings: Dict[str, Dict[str, object]]) -> None:
 SETTINGS = {
     "1": {"TF_NUM_INTRAOP_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
           "TF_NUM_INTEROP_THREADS": None},
+    "sweep": {"TF_NUM_INTRAOP_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+              "TF_NUM_INTEROP_THREADS": "1"},
     "default": {"TF_NUM_INTRAOP_THREADS": None, "OPENBLAS_NUM_THREADS": None,
                 "OMP_NUM_THREADS": None, "TF_NUM_INTEROP_THREADS": None},
 }
@@ -699,6 +708,7 @@ def table(results: Dict[str, object]) -> List[Dict[str, object]]:
     """The table's rows (see the module doc) from both settings' measurements."""
     settings = results["settings"]
     peak = {s: max(settings[s]["matmul_gflops"].values()) for s in settings}
+    one_core = peak.get("1", peak.get("sweep"))
     rows = []
     for s, res in settings.items():
         bandwidth = max(res["elementwise_gbs"].values()) * 1e9
@@ -707,7 +717,7 @@ def table(results: Dict[str, object]) -> List[Dict[str, object]]:
             rows.append({
                 "task": r["problem"], "N": r["N"], "threads": s,
                 "mflop": r["flops"] / 1e6, "seconds": r["seconds"], "gflops": rate,
-                "peak1_percent": 100 * rate / peak["1"] if "1" in peak else None,
+                "peak1_percent": 100 * rate / one_core if one_core else None,
                 "peak2_percent": 100 * rate / peak["default"] if "default" in peak else None,
                 "ops": r["executed"], "graph_ops": r["graph_operations"],
                 "overhead_percent": 100 * r["executed"] * res["op_seconds"] / r["seconds"],
@@ -764,7 +774,8 @@ def main(argv=None):
     parser.add_argument("--matmul-size", type=int, default=2000)
     parser.add_argument("--elements", type=int, default=2 ** 23,
                         help="float64 entries per array of the elementwise reference")
-    parser.add_argument("--threads", choices=["1", "default", "both"], default="both")
+    parser.add_argument("--threads", choices=["1", "sweep", "default", "both", "all"],
+                        default="both", help="both: 1 and default; all: the three")
     parser.add_argument("--json", default=None, help="write the results to this file")
     parser.add_argument("--_worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--_no-count", action="store_true", help=argparse.SUPPRESS)
@@ -782,9 +793,12 @@ def main(argv=None):
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                     "processor": platform.processor(), "python": platform.python_version()},
         "load_before": [round(x, 2) for x in os.getloadavg()], "settings": {}}
-    for i, setting in enumerate(["1", "default"] if args.threads == "both"
-                                else [args.threads]):
-        results["settings"][setting] = run_setting(setting, args, count=i == 0)
+    chosen = {"both": ["1", "default"], "all": ["1", "sweep", "default"]}.get(
+        args.threads, [args.threads])
+    for i, setting in enumerate(chosen):
+        # the sweep setting's graph has one group of output pairs: counted on its own
+        results["settings"][setting] = run_setting(setting, args,
+                                                   count=i == 0 or setting == "sweep")
     results["load_after"] = [round(x, 2) for x in os.getloadavg()]
     share_counts(results["settings"])
     first = next(iter(results["settings"].values()))

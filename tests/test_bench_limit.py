@@ -121,3 +121,38 @@ def test_quick_path_functions_on_a_tiny_problem(bench):
     # the slope of two minima: 20 calls each (as the script's least), so that a loaded
     # machine's delays do not reach every call of the shorter chain (3 were not enough)
     assert _positive_finite(bench.op_overhead(repeats=20, lengths=(100, 500)))
+
+
+def _setting(peak, seconds, pair_groups, counted):
+    row = {"problem": "cartpole", "N": 40, "seconds": seconds, "executed": 1000,
+           "floor_seconds": 0.01, "pair_block_flops": 6e6, "pair_block_seconds": 0.02,
+           "pair_groups": pair_groups}
+    if counted:
+        row.update(flops=1e7 * pair_groups, graph_operations=900 + pair_groups, bytes=1e6,
+                   floor_flops=1e5, flops_by_type={}, unknown_shapes=[],
+                   uncounted_types=[])
+    return {"matmul_gflops": {"numpy": peak, "tensorflow": peak / 2},
+            "elementwise_gbs": {"numpy": 10.0}, "op_seconds": 1e-6, "rows": [row]}
+
+
+def test_the_sweep_setting_keeps_its_own_count_and_is_rated_against_one_core(bench):
+    settings = {"1": _setting(20.0, 0.1, 2, counted=True),
+                "sweep": _setting(20.0, 0.2, 1, counted=True),
+                "default": _setting(40.0, 0.1, 2, counted=False)}
+    bench.share_counts(settings)
+    # the uncounted setting takes the first setting's count, the sweep's keeps its own
+    assert settings["default"]["rows"][0]["flops"] == 2e7
+    assert settings["sweep"]["rows"][0]["flops"] == 1e7
+    rows = {r["threads"]: r for r in bench.table({"settings": settings})}
+    assert rows["sweep"]["gflops"] == pytest.approx(0.05)
+    assert rows["sweep"]["peak1_percent"] == pytest.approx(0.25)  # of one core's 20
+    assert rows["sweep"]["peak2_percent"] == pytest.approx(0.125)  # of both cores' 40
+    # without the "1" process, one core's peak is the sweep process's
+    del settings["1"]
+    rows = {r["threads"]: r for r in bench.table({"settings": settings})}
+    assert rows["sweep"]["peak1_percent"] == pytest.approx(0.25)
+    # an uncounted setting whose graph differs from the counted one's is refused
+    settings = {"1": _setting(20.0, 0.1, 2, counted=True),
+                "default": _setting(40.0, 0.1, 1, counted=False)}
+    with pytest.raises(RuntimeError, match="pair groups"):
+        bench.share_counts(settings)
