@@ -161,7 +161,9 @@ class RunSettings:
     policy_compiler: str = setting(
         "graph", "compile the policy objective and its gradient as a TensorFlow graph, or "
         "whole by XLA (faster on small problems; compiled once per data-size bucket and "
-        "cached on disk: $PILCO_XLA_CACHE, default ~/.cache/pilco/xla)",
+        "cached on disk: $PILCO_XLA_CACHE, default ~/.cache/pilco/xla; TensorFlow logs "
+        "'Error parsing text-format tensorflow.XlaSerializedCacheEntry' for each program it "
+        "loads from there: harmless, the load succeeds)",
         choices=("graph", "xla"), group="learning")
     policy_min_rel_improvement: Optional[float] = setting(
         None, "stop a policy optimisation once its predicted return grew by less than this "
