@@ -20,7 +20,6 @@ this run ignores those outputs and discards its own. This file
 * skips a notebook whose metadata lists Python modules that are not installed
   (``"pilco": {"requires": [...]}``; the reacher notebooks need mujoco and
   gymnasium_robotics);
-* hands the slowest files to the pytest-xdist workers first (:data:`SLOW_FILES`);
 * fails a notebook whose execution changed anything in ``notebooks/``, and refuses
   nbmake's ``--overwrite`` (it would store the FAST outputs, uncleaned, in place of the
   full ones: ``python notebooks/execute.py`` stores outputs).
@@ -46,20 +45,6 @@ NOTEBOOK_DIR = ROOT / "notebooks"
 #: seconds per notebook, all cells together (the issue's limit for the full settings;
 #: FAST runs take 15-35 s each and full ones 25-110 s on 2 shared cores)
 NOTEBOOK_TIMEOUT = 180
-
-#: the files whose tests take longest (module fixtures and subprocesses included), slowest
-#: first. The suite runs each file on one pytest-xdist worker (``--dist loadfile``);
-#: handing these out first, with ``--no-loadscope-reorder`` (xdist would otherwise order
-#: files by their number of tests, which puts these few-test files last), keeps a long
-#: file from running alone at the end while the other workers are idle.
-SLOW_FILES = (
-    "tests/test_sweep_faults.py", "tests/test_examples.py", "tests/test_xla.py",
-    "tests/test_sweep_ray.py", "notebooks/03_damaged_reacher.ipynb",
-    "tests/test_hard_kill.py", "tests/test_paper_api.py", "tests/test_reacher_multi.py",
-    "notebooks/02_reacher.ipynb", "notebooks/05_multi_target_reacher.ipynb",
-    "tests/test_multitask.py", "tests/test_bench_limit.py",
-    "tests/test_adaptation_noise.py",
-)
 
 
 def _is_notebook(item) -> bool:
@@ -92,18 +77,7 @@ def pytest_configure(config):
             "cleaned outputs")
 
 
-def _slow_rank(item) -> int:
-    """Position of the item's file in :data:`SLOW_FILES` (after them: the others)."""
-    try:
-        name = Path(item.path).resolve().relative_to(ROOT).as_posix()
-    except ValueError:
-        return len(SLOW_FILES)
-    return SLOW_FILES.index(name) if name in SLOW_FILES else len(SLOW_FILES)
-
-
 def pytest_collection_modifyitems(config, items):
-    # slowest files first; a stable sort keeps the order inside each file and of the rest
-    items.sort(key=_slow_rank)
     explicit_timeout = config.getoption("timeout", None) is not None
     for item in items:
         if not _is_notebook(item):
