@@ -93,6 +93,8 @@ from typing import Callable, Dict, Iterable, List, Optional
 
 import numpy as np
 
+from pilco.runtime import thread_environment
+
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # bench_policy, run by path
 
 #: the sizes measured: number of transitions of each problem
@@ -658,8 +660,8 @@ def share_counts(settings: Dict[str, Dict[str, object]]) -> None:
 SETTINGS = {
     "1": {"TF_NUM_INTRAOP_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
           "TF_NUM_INTEROP_THREADS": None},
-    "sweep": {"TF_NUM_INTRAOP_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
-              "TF_NUM_INTEROP_THREADS": "1"},
+    # exactly what a sweep gives a run on one CPU
+    "sweep": thread_environment(1, base={}),
     "default": {"TF_NUM_INTRAOP_THREADS": None, "OPENBLAS_NUM_THREADS": None,
                 "OMP_NUM_THREADS": None, "TF_NUM_INTEROP_THREADS": None},
 }
