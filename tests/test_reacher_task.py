@@ -388,17 +388,18 @@ def test_a_resumed_damaged_run_keeps_its_damage_mode(mode, tmp_path):
     tiny = ["--horizon", "4", "--planning-horizon", "3", "--basis-functions", "2",
             "--policy-iters", "1", "--model-iters", "2", "--quiet", "--no-render",
             "--no-figures", "--output", str(tmp_path)]
+    # the random episode, saved; then the resumed run's learned one
     first = DAMAGED_REACHER.experiment(
-        DAMAGED_REACHER.parse([*tiny, "--episodes", "2", "--damage-mode", mode]))
+        DAMAGED_REACHER.parse([*tiny, "--episodes", "1", "--damage-mode", mode]))
     first.run()
     elbow = first.episodes[-1].states[:, 3 + 3]
     np.testing.assert_allclose(elbow, 2.0 if mode == "stuck" else 0.0)
-    args = DAMAGED_REACHER.parse([*tiny, "--episodes", "3", "--resume", str(tmp_path)])
+    args = DAMAGED_REACHER.parse([*tiny, "--episodes", "2", "--resume", str(tmp_path)])
     assert args.damage_mode == mode
     resumed = DAMAGED_REACHER.experiment(args)
     assert resumed.make_env().unwrapped.damage_mode == mode
     resumed.run()
-    assert len(resumed.episodes) == 3
+    assert len(resumed.episodes) == 2 and not resumed.episodes[-1].random
     np.testing.assert_allclose(resumed.episodes[-1].states[:, 3 + 3], elbow[0])
 
 

@@ -201,6 +201,8 @@ def test_optimize_policy_with_xla_improves_the_policy_and_retraces_for_a_new_hor
     np.testing.assert_allclose(agent.expected_return(), best, rtol=1e-9)
     agent._rollout.refresh(agent.mgpr)
     graph = _flat(agent, _value_and_gradient(agent, agent._rollout.policy_loss))
+    # the padded data the optimiser's program was compiled for (no second compilation)
+    agent._rollout.refresh(agent.mgpr, pad=True)
     _assert_same(_xla_objective(agent), graph, 1e-9)
     agent.horizon = 5  # the XLA trace had 3 steps as a constant: it must be traced again
     start = agent.expected_return()
