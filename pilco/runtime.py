@@ -53,16 +53,39 @@ _FACTORY = re.compile(rb"Unable to register cu[A-Za-z]+ factory")
 # absl's note before its first log line; dropped with the line it introduces
 _ABSL_NOTE = re.compile(rb"^WARNING: All log messages before absl::InitializeLog\(\) is called "
                         rb"are written to STDERR\s*$")
+# A line in absl's format ("I0000 00:00:1700000000.000000    1234 port.cc:153] ..."): its
+# first letter is the severity. Some are written before TensorFlow's logging has read
+# TF_CPP_MIN_LOG_LEVEL (oneDNN's "custom operations are on" notice on CPUs where oneDNN is
+# on by default), so the level does not hide them.
+_ABSL_LINE = re.compile(rb"^([IWEF])\d{4} \d+:\d+:\d+\.\d+\s+\d+ [^\]\s]+\] ")
+_SEVERITY = {b"I": 0, b"W": 1, b"E": 2, b"F": 3}
 
 
-def _probe_lines(lines: List[bytes]) -> List[bool]:
-    """Which of ``lines`` (stderr written during TensorFlow's import) are its CUDA probe:
-    the no-drivers and factory lines, the cuInit failure when the same import reported
-    no drivers (on a machine with drivers that failure is a real error), and absl's
-    note right before a line so dropped."""
+def _below_level(line: bytes, level: int) -> bool:
+    """Whether ``line`` is an absl-format line of a severity that ``TF_CPP_MIN_LOG_LEVEL
+    = level`` hides (INFO below 1, WARNING below 2, ERROR below 3)."""
+    match = _ABSL_LINE.match(line)
+    return bool(match) and _SEVERITY[match.group(1)] < level
+
+
+def _log_level_setting() -> int:
+    """``TF_CPP_MIN_LOG_LEVEL`` as a number (0 when unset or not a whole number)."""
+    try:
+        return int(os.environ.get("TF_CPP_MIN_LOG_LEVEL", "0").strip())
+    except ValueError:
+        return 0
+
+
+def _probe_lines(lines: List[bytes], level: int = 0) -> List[bool]:
+    """Which of ``lines`` (stderr written during TensorFlow's import) to drop: its CUDA
+    probe (the no-drivers and factory lines, the cuInit failure when the same import
+    reported no drivers: on a machine with drivers that failure is a real error), the
+    absl-format lines that ``TF_CPP_MIN_LOG_LEVEL = level`` hides (:func:`_below_level`),
+    and absl's note right before a line so dropped."""
     no_drivers = any(_NO_DRIVERS.search(line) for line in lines)
     drop = [bool(_NO_DRIVERS.search(line) or _FACTORY.search(line)
-                 or (no_drivers and _CUINIT.search(line))) for line in lines]
+                 or (no_drivers and _CUINIT.search(line)) or _below_level(line, level))
+            for line in lines]
     for i in range(len(lines) - 1):
         if not drop[i] and drop[i + 1] and _ABSL_NOTE.match(lines[i]):
             drop[i] = True
@@ -113,7 +136,7 @@ def _stderr_without_probe_lines() -> Iterator[None]:
             lines = capture.read().splitlines(keepends=True)
         finally:
             capture.close()
-        drop = _probe_lines(lines)
+        drop = _probe_lines(lines, _log_level_setting())
         with contextlib.suppress(OSError):  # a closed stderr must not mask the import's error
             _write_all(2, b"".join(line for line, gone in zip(lines, drop) if not gone))
 
@@ -174,7 +197,9 @@ def quiet_tensorflow() -> None:
     later, wherever it happens) run with file descriptor 2 redirected, then write back
     everything it wrote except the CUDA probe lines of a machine without CUDA ("Could
     not find cuda drivers on your machine, GPU will not be used.", which no log level
-    hides, "failed call to cuInit", "Unable to register cuDNN/cuFFT/cuBLAS factory").
+    hides, "failed call to cuInit", "Unable to register cuDNN/cuFFT/cuBLAS factory") and
+    the lines of a severity the level hides that are written before TensorFlow reads it
+    (oneDNN's "custom operations are on" notice).
     Other output of the import, a traceback included, is written back in full once the
     import ends (a process killed during the import loses it). A process that does not
     import TensorFlow pays nothing.

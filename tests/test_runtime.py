@@ -189,6 +189,23 @@ def test_probe_lines_are_matched_narrowly():
     assert runtime._probe_lines(lines) == [False, False, True, False, False]
 
 
+ONEDNN = ("I0000 00:00:1700000000.000000    1234 port.cc:153] oneDNN custom operations are "
+          "on. You may see slightly different numerical results due to floating-point "
+          "round-off errors from different computation orders.")
+WARNED = "W0000 00:00:1700000000.000000    1234 gpu_device.cc:2344] Cannot dlopen some GPU libraries."
+
+
+def test_lines_below_the_users_level_go_with_their_absl_note():
+    """Lines in absl's format that TensorFlow writes before it reads TF_CPP_MIN_LOG_LEVEL
+    go when their severity is below the level; lines of other formats always stay."""
+    lines = [ABSL_NOTE.encode() + b"\n", ONEDNN.encode() + b"\n", WARNED.encode() + b"\n",
+             CUINIT.encode() + b"\n", b"I0000 is not a log line\n"]
+    assert runtime._probe_lines(lines, 0) == [False] * 5
+    assert runtime._probe_lines(lines, 1) == [True, True, False, False, False]
+    assert runtime._probe_lines(lines, 2) == [True, True, True, False, False]
+    assert runtime._probe_lines(lines, 3) == [True, True, True, True, False]
+
+
 # ----------------------------------------------------------------------------- logging
 def test_log_levels_by_name_in_any_case():
     assert runtime.log_level("warning") == logging.WARNING
