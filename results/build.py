@@ -75,9 +75,11 @@ MAX_BYTES = 200_000
 
 EPISODE_FIELDS = ("episode", "random", "steps", "min_distance", "final_distance",
                   "steps_to_target")
-#: task-specific summary fields kept per run: the adaptation's damage and recovery, the
-#: multi-target reacher's held-out test (steps per test target, how many within the rule)
-TASK_FIELDS = ("damage_at_episode", "episodes_to_recover", "test_steps", "test_reached")
+#: summary fields kept per run when present: the adaptation's damage and recovery, the
+#: multi-target reacher's held-out test (steps per test target, how many within the rule),
+#: whether a run held its first success to the end and which learned episodes were solved
+TASK_FIELDS = ("damage_at_episode", "episodes_to_recover", "test_steps", "test_reached",
+               "held_for_good", "solved_episodes")
 RUN_FIELDS = ("setting", "seed", "success", "solved", "solved_at_episode", "seconds",
               "episodes", "distances")
 

@@ -52,6 +52,16 @@ class ExperimentConfig:
             the episode before; ``"solved"``: only once an episode was solved; before
             that, each learned episode after the first starts from a fresh random policy
             (``controller.randomize``), the same number of searches as the warm start.
+        policy_start_mixture: the spread of the policy objective's start mixture
+            (:attr:`pilco.models.PILCO.start_spread`; ``None`` or 0: one Gaussian start).
+        policy_start_mixture_when: ``"always"``; ``"solved"``: the start mixture is used
+            only once an episode has been solved (it keeps a policy that works working
+            from the whole start distribution; before that, the plain objective);
+            ``"fragile"``: once solved, the plain search runs first and the mixture's
+            search follows only when the policy it found is fragile, its plain expected
+            return above the mixture's by more than ``policy_fragile_gap``.
+        policy_fragile_gap: the gap (in reward, i.e. steps at full cost) between the
+            plain and the mixture's expected return above which a policy is fragile.
         cost_width: width of the saturating cost of the distance (summary ``cost``).
         success_threshold: distance [m] counted as "at the target".
         solved_rule: ``"reach"``: an episode is solved when any state is within the
@@ -89,6 +99,9 @@ class ExperimentConfig:
     policy_restart_when: str = "always"
     policy_restart_from: int = 1
     policy_warm_start: str = "always"
+    policy_start_mixture: Optional[float] = None
+    policy_start_mixture_when: str = "solved"
+    policy_fragile_gap: float = 1.0
     cost_width: float = 0.25
     success_threshold: float = 0.05
     solved_rule: str = "reach"
@@ -125,6 +138,22 @@ class ExperimentConfig:
         if self.episodes < self.random_episodes:
             raise ValueError(f"episodes ({self.episodes}) must be >= random_episodes "
                              f"({self.random_episodes})")
+        if self.policy_start_mixture_when not in ("always", "solved", "fragile"):
+            raise ValueError(f"policy_start_mixture_when must be 'always', 'solved' or "
+                             f"'fragile', got {self.policy_start_mixture_when!r}")
+        if (isinstance(self.policy_fragile_gap, bool)
+                or not isinstance(self.policy_fragile_gap, (int, float))
+                or not self.policy_fragile_gap >= 0):
+            raise ValueError(f"policy_fragile_gap must be a number >= 0, got "
+                             f"{self.policy_fragile_gap!r}")
+        if self.policy_start_mixture == 0:
+            self.policy_start_mixture = None
+        if self.policy_start_mixture is not None and (
+                isinstance(self.policy_start_mixture, bool)
+                or not isinstance(self.policy_start_mixture, (int, float))
+                or self.policy_start_mixture < 0):
+            raise ValueError(f"policy_start_mixture must be a number >= 0 or None, got "
+                             f"{self.policy_start_mixture!r}")
         if self.max_data == 0:
             self.max_data = None
         if self.max_data is not None and self.max_data < 2:
@@ -148,6 +177,22 @@ class ExperimentConfig:
         iteration runs)."""
         if self.policy_early_stop == "always" or solved:
             return self.policy_min_rel_improvement
+        return None
+
+    def start_mixture_at(self, solved: bool) -> Optional[float]:
+        """The spread of the policy objective's start mixture in a search, given whether an
+        earlier episode was solved (None: the plain objective; with ``"fragile"`` the
+        search is plain and :meth:`fragile_check_at` says whether a mixture's follows)."""
+        when = self.policy_start_mixture_when
+        if when == "always" or (when == "solved" and solved):
+            return self.policy_start_mixture
+        return None
+
+    def fragile_check_at(self, solved: bool) -> Optional[float]:
+        """The start mixture's spread when the plain search's policy is to be checked for
+        fragility (``"fragile"`` once solved), else None."""
+        if self.policy_start_mixture_when == "fragile" and solved:
+            return self.policy_start_mixture
         return None
 
     def policy_restarts_at(self, number: int, solved: bool) -> int:

@@ -44,27 +44,69 @@ def improve_policy(exp, number: int) -> float:
     restarts as :meth:`ExperimentConfig.policy_early_stop_at` (always, or with
     ``policy_early_stop="solved"`` once an episode was solved) and
     :meth:`ExperimentConfig.policy_restarts_at` say (from episode ``policy_restart_from``
-    on; with ``policy_restart_when="unsolved"`` until an episode was solved).
+    on; with ``policy_restart_when="unsolved"`` until an episode was solved), and the
+    start mixture as :meth:`ExperimentConfig.start_mixture_at` says.
     The search starts from the agent's current policy (see :func:`learn_policy`).
     Returns the predicted return."""
     cfg, agent = exp.config, exp.agent
     iters = cfg.policy_iterations(number)
     solved = exp.solved_at_episode() is not None
     restarts = cfg.policy_restarts_at(number, solved)
+    spread = cfg.start_mixture_at(solved)
+    if spread is not None or getattr(agent, "start_spread", None) is not None:
+        agent.start_spread = spread
+    exp.policy_notes = {}
     if exp.before_policy_search is not None:
         exp.before_policy_search(agent, number)
     # XLA is asked for only when chosen: agents without the option keep working
     compiler = {"jit_compile": True} if cfg.policy_compiler == "xla" else {}
-    with progress_bar(iters * restarts, f"episode {number} policy", cfg.quiet) as bar:
-        expected = agent.optimize_policy(
-            maxiter=iters, restarts=restarts,
-            seed=exp.episode_seed(number), callback=optimizer_callback(bar),
-            method=cfg.policy_method,
-            min_rel_improvement=cfg.policy_early_stop_at(solved),
-            patience=cfg.policy_patience, **compiler)
+
+    def search(what: str, runs: int) -> float:
+        with progress_bar(iters * runs, f"episode {number} {what}", cfg.quiet) as bar:
+            return agent.optimize_policy(
+                maxiter=iters, restarts=runs,
+                seed=exp.episode_seed(number), callback=optimizer_callback(bar),
+                method=cfg.policy_method,
+                min_rel_improvement=cfg.policy_early_stop_at(solved),
+                patience=cfg.policy_patience, **compiler)
+
+    expected = search("policy", restarts)
+    check = cfg.fragile_check_at(solved)
+    if check is not None:
+        expected = _unless_fragile(exp, number, check, expected, search)
     logger.info("episode %d: predicted return %.3f over %d steps", number, expected,
                 agent.horizon)
     return expected
+
+
+def _unless_fragile(exp, number: int, spread: float, plain: float, search) -> float:
+    """The fragility check after a plain policy search: the policy's expected return from
+    the start mixture of ``spread``; when it falls short of the ``plain`` one by more than
+    ``policy_fragile_gap``, the policy fails from the start distribution's flanks, and a
+    search on the mixture's objective continues from it. Notes the check in
+    ``exp.policy_notes``; returns the predicted return of the objective searched last."""
+    agent, gap_allowed = exp.agent, exp.config.policy_fragile_gap
+    evaluations = agent.policy_evaluations
+    agent.start_spread = spread
+    try:
+        mixed = agent.expected_return()
+        gap = plain - mixed
+        note = {"plain_return": float(plain), "mixture_return": float(mixed),
+                "searched": bool(gap > gap_allowed)}
+        if gap > gap_allowed:
+            logger.info("episode %d: the policy is fragile (expected return %.3f from the "
+                        "start distribution, %.3f from its mixture): searching on the "
+                        "mixture", number, plain, mixed)
+            best = search("policy (start mixture)", 1)
+            note["searched_return"] = float(best)
+            note["extra_evaluations"] = evaluations
+            exp.policy_notes = {"start_mixture": note,
+                                "extra_evaluations": note.pop("extra_evaluations")}
+            return best
+        exp.policy_notes = {"start_mixture": note}
+        return plain
+    finally:
+        agent.start_spread = None
 
 
 def start_policy(exp, number: int) -> None:

@@ -60,6 +60,10 @@ class RunRecord:
         self._t_start: Optional[float] = None
         #: the training data of the last model fit (``train_model`` skips an identical refit)
         self.model_trained_on: Optional[Data] = None
+        #: what the coming learned episode's policy phase adds to its record (the start
+        #: mixture's fragility check, ``start_mixture``) and its further objective
+        #: evaluations (``extra_evaluations``), set by :func:`~.learning.improve_policy`
+        self.policy_notes: Dict[str, Any] = {}
 
     @property
     def directory(self) -> str:
@@ -152,6 +156,13 @@ class RunRecord:
         # episode; None when the agent does not count them)
         rec["policy_evaluations"] = (0 if episode.random else None) \
             if policy_evaluations is None else int(policy_evaluations)
+        if not episode.random and self.policy_notes:
+            notes = dict(self.policy_notes)
+            if rec["policy_evaluations"] is not None:
+                rec["policy_evaluations"] += int(notes.pop("extra_evaluations", 0))
+            notes.pop("extra_evaluations", None)
+            rec.update(notes)
+        self.policy_notes = {}
         self.records.append(rec)
         for p in PHASES:
             self.seconds[p] += float(seconds.get(p, 0.0))

@@ -2,7 +2,7 @@
 rule, and the per-episode record written to ``summary.json``."""
 from __future__ import annotations
 
-from typing import Any, Callable, Dict
+from typing import Any, Callable, Dict, List
 
 import numpy as np
 
@@ -11,6 +11,7 @@ from .episode import Episode
 from .provenance import provenance
 
 __all__ = ["PHASES", "saturating_cost", "distances_solved", "episode_solved",
+           "solved_episodes", "held_for_good", "held_for_good_rule",
            "solved_in_last_episode", "episode_record", "summarise"]
 
 #: the timed phases of a learned episode, as in the paper's timing table
@@ -40,6 +41,30 @@ def distances_solved(distances, config: ExperimentConfig) -> bool:
         return bool(np.any(d < thr))
     k = config.hold_steps
     return bool(len(d) >= k and np.all(d[-k:] < thr))
+
+
+def solved_episodes(records, distances, config: ExperimentConfig) -> List[int]:
+    """Numbers (1-based) of the learned episodes that meet the task's rule, given the
+    summary's episode ``records`` and their ``distances``."""
+    return [int(r["episode"]) for r, d in zip(records, distances)
+            if not r["random"] and distances_solved(d, config)]
+
+
+def held_for_good(records, distances, config: ExperimentConfig) -> bool:
+    """Whether the task was solved in a learned episode and in every learned episode
+    after it, to the run's last: a controller that, once it works, keeps working."""
+    learned = [int(r["episode"]) for r in records if not r["random"]]
+    solved = solved_episodes(records, distances, config)
+    return bool(solved) and solved == [e for e in learned if e >= solved[0]]
+
+
+def held_for_good_rule(config: ExperimentConfig) -> Callable[[Dict[str, Any]], bool]:
+    """``summary -> bool``: :func:`held_for_good` of the run (a success rule)."""
+
+    def success(summary: Dict[str, Any]) -> bool:
+        return held_for_good(summary["episodes"], summary["distances"], config)
+
+    return success
 
 
 def solved_in_last_episode(config: ExperimentConfig) -> Callable[[Dict[str, Any]], bool]:
@@ -76,7 +101,8 @@ def episode_record(episode: Episode, number: int, seconds: Dict[str, float],
 
 def summarise(exp) -> Dict[str, Any]:
     """The summary (``summary.json``) of :class:`~pilco.experiment.Experiment` ``exp``:
-    task, seed, ``solved``, ``solved_at_episode``, the episode records, ``seconds`` per
+    task, seed, ``solved``, ``solved_at_episode``, ``solved_episodes`` (the learned
+    episodes that met the rule), ``held_for_good`` (:func:`held_for_good`), the episode records, ``seconds`` per
     phase and ``total`` wall time (all sessions; figures excluded), the task's
     ``summary_fields``, ``complete`` (the loop finished), ``distances`` per episode and
     ``success`` (the task's rule, default ``solved``) and ``provenance`` (code version,
@@ -94,5 +120,7 @@ def summarise(exp) -> Dict[str, Any]:
         "distances": [[float(v) for v in e.distances] for e in exp.episodes],
         "provenance": provenance(),
     }
+    summary["solved_episodes"] = solved_episodes(exp.records, summary["distances"], exp.config)
+    summary["held_for_good"] = held_for_good(exp.records, summary["distances"], exp.config)
     summary["success"] = bool(exp.success_fn(summary) if exp.success_fn else summary["solved"])
     return summary

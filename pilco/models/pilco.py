@@ -43,7 +43,7 @@ from .mgpr import MGPR
 from .policy_search import GuardedScipy, search_policy
 from .rollout import Rollout
 from .smgpr import SMGPR
-from .starts import check_starts, check_task
+from .starts import check_spread, check_starts, check_task
 from .transitions import Transitions
 
 __all__ = ["PILCO", "POLICY_METHODS"]
@@ -133,6 +133,8 @@ class PILCO(gpflow.base.Module):
         they are traces of the controller, reward and starts they saw."""
         self._policy_optimizer = GuardedScipy()
         self._xla_optimizer = GuardedScipy()
+        self._mixture_optimizer = GuardedScipy()  # the start mixture's objective
+        self._xla_mixture_optimizer = GuardedScipy()
 
     def _check_controller(self, controller):
         """``controller`` follows the protocol, reads the policy's features and returns U
@@ -185,7 +187,9 @@ class PILCO(gpflow.base.Module):
     @horizon.setter
     def horizon(self, value: int):
         if self._rollout.set_horizon(check_positive_int(value, "horizon")):
-            self._xla_optimizer = GuardedScipy()  # its trace has the horizon as a constant
+            # their traces have the horizon as a constant
+            self._xla_optimizer = GuardedScipy()
+            self._xla_mixture_optimizer = GuardedScipy()
 
     @property
     def m_init(self) -> np.ndarray:
@@ -233,6 +237,22 @@ class PILCO(gpflow.base.Module):
         if self._rollout.set_starts(m, S):
             self._drop_compiled()  # its compiled objective is a trace
         self._shared_S = shared
+
+    @property
+    def start_spread(self) -> Optional[float]:
+        """The policy objective's start mixture: None (each task's start distribution
+        propagated as one Gaussian, the MATLAB objective) or the spread ``a`` of
+        :func:`pilco.models.starts.start_mixture`: each start ``N(m, S)`` is split into
+        2D + 1 Gaussians of covariance ``(1 - 2a² / (2D + 1)) S``, one at ``m`` and two at
+        ``m ± a sqrt(λ_i) v_i`` along each eigenvector of ``S`` (the same mean and
+        covariance), propagated one by one; a task's expected return is their mean. A
+        policy that fails from the flanks of the start distribution is then seen to fail,
+        at 2D + 1 times the objective's cost. Setting 0 or None switches it off."""
+        return self._rollout.start_spread
+
+    @start_spread.setter
+    def start_spread(self, value) -> None:
+        self._rollout.set_start_mixture(check_spread(value, self.state_dim))
 
     @property
     def context_indices(self):
@@ -423,10 +443,13 @@ class PILCO(gpflow.base.Module):
                              f"method; {type(self.controller).__name__} has none")
         jit_compile = check_bool(jit_compile, "jit_compile")
         self._rollout.refresh(self.mgpr, pad=jit_compile)
+        ro, mixture = self._rollout, self.start_spread is not None
         if jit_compile:
-            loss, optimizer = self._rollout.xla_policy_loss, self._xla_optimizer
+            loss, optimizer = ((ro.xla_mixture_policy_loss, self._xla_mixture_optimizer)
+                               if mixture else (ro.xla_policy_loss, self._xla_optimizer))
         else:
-            loss, optimizer = self._rollout.policy_loss, self._policy_optimizer
+            loss, optimizer = ((ro.mixture_policy_loss, self._mixture_optimizer)
+                               if mixture else (ro.plain_policy_loss, self._policy_optimizer))
         self._last_search = optimizer
         return search_policy(loss, self.controller, optimizer, maxiter, restarts, rng, method,
                              callback, min_rel_improvement, patience, jit_compile=jit_compile)

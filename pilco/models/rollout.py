@@ -15,7 +15,10 @@ One step (MATLAB PILCO's ``propagate``) maps the state distribution ``x_t ~ N(m,
    kept.
 
 The policy objective is the sum, over one or more start distributions (tasks), of the
-expected rewards of ``horizon`` steps. Each horizon is one ``tf.while_loop`` inside a
+expected rewards of ``horizon`` steps. With a start mixture (:meth:`Rollout.set_start_mixture`)
+each task's start distribution is split into 2D + 1 narrower Gaussians of the same mean and
+covariance (:func:`pilco.models.starts.start_mixture`), each propagated on its own, and the
+task's expected return is their mean. Each horizon is one ``tf.while_loop`` inside a
 compiled function, traced once; the
 dynamics GP's factorisation (Cholesky, ``beta`` and ``K^-1``) does not depend on the
 policy: :meth:`Rollout.refresh` computes it once per policy optimisation and stores it
@@ -29,6 +32,8 @@ rather than once per data size.
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import gpflow
 import tensorflow as tf
 from gpflow.config import default_float
@@ -37,6 +42,7 @@ from .. import moments
 from ..angles import augment_state
 from ..protocols import Controller, Reward
 from .layout import StateLayout
+from .starts import start_mixture
 
 __all__ = ["Rollout"]
 
@@ -92,6 +98,9 @@ class Rollout(gpflow.base.Module):
         self.m_init = tf.Variable(m_init, shape=[None, D], trainable=False, name="m_init")
         self.S_init = tf.Variable(S_init, shape=[None, D, D], trainable=False, name="S_init")
         self.num_tasks = int(m_init.shape[0])
+        self.start_spread = None  # no start mixture (set_start_mixture)
+        self._mixture_means = None  # [T, K, D] and [T, D, D] variables once a mixture is set
+        self._mixture_covariances = None
         self._controller = controller
         self._reward = reward
         self.angle_indices = layout.angle_indices
@@ -115,6 +124,7 @@ class Rollout(gpflow.base.Module):
         """(Re)create the compiled functions. A trace captures the controller and the
         reward it was traced with, so replacing either must drop the old traces."""
         self.total_reward = tf.function(self._total_reward, autograph=False)
+        self.mixture_total = tf.function(self._mixture_total, autograph=False)
         self.trajectory = tf.function(self._trajectory, autograph=False)
         self.action = tf.function(self._action, autograph=False)
 
@@ -126,9 +136,37 @@ class Rollout(gpflow.base.Module):
         self.S_init.assign(S_init)
         changed = int(m_init.shape[0]) != self.num_tasks
         self.num_tasks = int(m_init.shape[0])
+        if self.start_spread is not None:
+            self._assign_mixture()
         if changed:
             self.retrace()
         return changed
+
+    def set_start_mixture(self, spread) -> None:
+        """Split every task's start distribution into :func:`~pilco.models.starts.start_mixture`'s
+        2D + 1 components of this ``spread`` (checked by the caller; None: one Gaussian per
+        task, the plain objective). The plain and the mixture objectives are functions of
+        their own (:meth:`plain_policy_loss`, :meth:`mixture_policy_loss`): switching
+        between them retraces neither."""
+        self.start_spread = None if spread is None else float(spread)
+        if self.start_spread is not None:
+            self._assign_mixture()
+
+    def _assign_mixture(self) -> None:
+        """The mixture components of the current starts, into their variables."""
+        m0, S0 = self.m_init.numpy(), self.S_init.numpy()
+        parts = [start_mixture(m, S, self.start_spread) for m, S in zip(m0, S0)]
+        means = tf.constant([p[0] for p in parts], dtype=default_float())  # [T, K, D]
+        covs = tf.constant([p[1] for p in parts], dtype=default_float())  # [T, D, D]
+        if self._mixture_means is None:
+            self._mixture_means = tf.Variable(means, shape=[None, None, self.state_dim],
+                                              trainable=False, name="mixture_means")
+            self._mixture_covariances = tf.Variable(
+                covs, shape=[None, self.state_dim, self.state_dim], trainable=False,
+                name="mixture_covariances")
+        else:
+            self._mixture_means.assign(means)
+            self._mixture_covariances.assign(covs)
 
     @property
     def controller(self) -> Controller:
@@ -256,16 +294,64 @@ class Rollout(gpflow.base.Module):
         )
         return m, s, total
 
-    def task_totals(self, xla: bool = False):
+    def _mixture_total(self, means, cov, horizon, maximum_iterations=None):
+        """Sum over K start distributions ``N(means[k], cov)`` of their total expected
+        reward of steps 1..H, as one loop of K·H steps that restarts from the next start
+        every H steps (one trace and one loop whatever K).
+
+        Shapes: means [K, 1, D], cov [D, D], horizon scalar int32 (or a Python int, with
+        ``maximum_iterations`` K·H for XLA) -> total [1, 1].
+        """
+        dynamics = self.dynamics()
+        prepared = self.controller.prepare()
+        D = self.state_dim
+        K = int(means.shape[0])
+
+        def body(t, m, s, total):
+            restart = tf.equal(t % horizon, 0)
+            m = tf.where(restart, tf.gather(means, tf.minimum(t // horizon, K - 1)), m)
+            s = tf.where(restart, cov, s)
+            m, s = self.step(m, s, dynamics, prepared)
+            r, _ = self.reward.moments(m, s)
+            return t + 1, m, s, total + r
+
+        _, _, _, total = tf.while_loop(
+            lambda t, *_: t < K * horizon, body,
+            (tf.constant(0), means[0], cov, tf.zeros([1, 1], dtype=means.dtype)),
+            shape_invariants=(tf.TensorShape([]), tf.TensorShape([1, D]),
+                              tf.TensorShape([D, D]), tf.TensorShape([1, 1])),
+            maximum_iterations=maximum_iterations,
+        )
+        return total
+
+    def task_totals(self, xla: bool = False, mixture: Optional[bool] = None):
         """Total expected reward of ``horizon`` steps from each start distribution
         ``N(m_init[i], S_init[i])``, with the dynamics model of the last refresh: a list
         of T tensors [1, 1]. Each task's horizon is its own call of the compiled
         :meth:`total_reward` (one trace serves all, the tasks have the same shapes); with
         ``xla``, of :meth:`_total_reward` traced inside :func:`pilco.moments.xla_compatible`
-        with the horizon as a constant trip count (see :meth:`xla_policy_loss`)."""
+        with the horizon as a constant trip count (see :meth:`xla_policy_loss`).
+        ``mixture`` (default: whether a start mixture is set) makes each task's total the
+        mean over its start mixture's components (:meth:`set_start_mixture`)."""
+        D = self.state_dim
+        if mixture is None:
+            mixture = self.start_spread is not None
+        if mixture:  # each task's 2D + 1 mixture components, their mean total
+            if self._mixture_means is None:
+                raise ValueError("no start mixture is set (set_start_mixture)")
+            K = 2 * D + 1
+            mm = tf.reshape(tf.convert_to_tensor(self._mixture_means), [-1, K, 1, D])
+            ms = tf.convert_to_tensor(self._mixture_covariances)
+            if xla:
+                H = self._horizon
+                with moments.xla_compatible():
+                    return [self._mixture_total(mm[i], ms[i], H, maximum_iterations=K * H) / K
+                            for i in range(self.num_tasks)]
+            horizon = tf.convert_to_tensor(self.horizon)
+            return [self.mixture_total(mm[i], ms[i], horizon) / K
+                    for i in range(self.num_tasks)]
         m0 = tf.convert_to_tensor(self.m_init)
         s0 = tf.convert_to_tensor(self.S_init)
-        D = self.state_dim
         starts = [(tf.reshape(m0[i], [1, D]), s0[i]) for i in range(self.num_tasks)]
         if xla:
             H = self._horizon
@@ -277,16 +363,30 @@ class Rollout(gpflow.base.Module):
 
     def policy_loss(self):
         """The policy objective (a scalar): minus the sum over the T start distributions
-        of the total expected reward of ``horizon`` steps. Traced inside the optimiser's
-        compiled function, the whole sum and its gradient are one graph."""
+        of the total expected reward of ``horizon`` steps (each task's the mean over its
+        start mixture when one is set). Traced inside the optimiser's compiled function,
+        the whole sum and its gradient are one graph."""
         return _negative_sum(self.task_totals())
 
+    def plain_policy_loss(self):
+        """:meth:`policy_loss` with one Gaussian start per task, whatever is set (a
+        function of its own for the optimiser's compiled cache)."""
+        return _negative_sum(self.task_totals(mixture=False))
+
+    def mixture_policy_loss(self):
+        """:meth:`policy_loss` over the start mixture's components (one must be set)."""
+        return _negative_sum(self.task_totals(mixture=True))
+
     def xla_policy_loss(self):
-        """:meth:`policy_loss` for a function compiled by XLA (``jit_compile=True``): traced
-        inside :func:`pilco.moments.xla_compatible`, the horizon loop with a constant trip
-        count (the horizon at trace time: a new horizon needs a new trace, see
-        :meth:`set_horizon`). The same value up to rounding."""
-        return _negative_sum(self.task_totals(xla=True))
+        """:meth:`plain_policy_loss` for a function compiled by XLA (``jit_compile=True``):
+        traced inside :func:`pilco.moments.xla_compatible`, the horizon loop with a
+        constant trip count (the horizon at trace time: a new horizon needs a new trace,
+        see :meth:`set_horizon`). The same value up to rounding."""
+        return _negative_sum(self.task_totals(xla=True, mixture=False))
+
+    def xla_mixture_policy_loss(self):
+        """:meth:`mixture_policy_loss` for a function compiled by XLA."""
+        return _negative_sum(self.task_totals(xla=True, mixture=True))
 
     def _trajectory(self, m0, s0, horizon):
         """States 0..H and their reward moments: M [H+1, D], S [H+1, D, D], R, Rv [H+1]."""

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..validation import check_covariance, check_gaussian
 
-__all__ = ["check_starts", "check_task"]
+__all__ = ["check_starts", "check_task", "start_mixture", "check_spread"]
 
 
 def _numpy(x):
@@ -87,3 +87,47 @@ def check_task(task, num_tasks: int) -> int:
         raise ValueError(f"task {int(task)} does not exist: the agent has {num_tasks} "
                          f"start distribution(s), tasks 0 to {num_tasks - 1}")
     return int(task)
+
+
+def check_spread(spread, state_dim: int):
+    """``None`` or 0 (no mixture), else a float ``0 < spread < sqrt(D + 1/2)`` (the
+    components' covariance ``(1 - 2 spread² / (2D + 1)) S`` must stay positive)."""
+    if spread is None:
+        return None
+    if isinstance(spread, (bool, np.bool_)) or not isinstance(spread, (int, float, np.number)):
+        raise TypeError(f"start mixture spread must be a number or None, got {spread!r}")
+    spread = float(spread)
+    if spread == 0.0:
+        return None
+    limit = float(np.sqrt(state_dim + 0.5))
+    if not 0.0 < spread < limit:
+        raise ValueError(f"start mixture spread must be in (0, {limit:.3f}) for a {state_dim}-"
+                         f"dimensional state (0 or None: no mixture), got {spread}")
+    return spread
+
+
+def start_mixture(m, S, spread: float) -> Tuple[np.ndarray, np.ndarray]:
+    """The start distribution ``N(m, S)`` as an equal-weight mixture of 2D + 1 narrower
+    Gaussians with the same mean and covariance: one at ``m`` and two at
+    ``m ± spread * sqrt(λ_i) v_i`` along each eigenvector ``v_i`` of ``S`` (eigenvalue
+    ``λ_i``), each with covariance ``c S``, ``c = 1 - 2 spread² / (2D + 1)``.
+
+    The mixture's mean is ``m`` and its covariance ``c S + (2 spread² / (2D + 1)) S = S``.
+    Propagated one by one, the components show the policy objective what happens from
+    the start distribution's flanks, which a single moment-matched Gaussian averages
+    away (a policy that fails from starts 1.5 standard deviations out can still be
+    predicted to succeed from ``N(m, S)`` as a whole).
+
+    Shapes: m [D], S [D, D] -> means [2D + 1, D], covariance [D, D] (shared).
+    """
+    m = np.asarray(m, dtype=np.float64).reshape(-1)
+    S = np.asarray(S, dtype=np.float64)
+    D = m.shape[0]
+    spread = check_spread(spread, D)
+    if spread is None:
+        return m[None], S
+    lam, V = np.linalg.eigh(0.5 * (S + S.T))
+    steps = spread * np.sqrt(np.clip(lam, 0.0, None))[None, :] * V  # column i: step along v_i
+    means = [m] + [m + sign * steps[:, i] for i in range(D) for sign in (1.0, -1.0)]
+    c = 1.0 - 2.0 * spread ** 2 / (2 * D + 1)
+    return np.stack(means), c * S

@@ -124,7 +124,9 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
     (Wilson), ``episodes_to_solve`` ``{q1, median, q3, solved, unsolved}``,
     ``last_episode`` ``{steps_to_target: {median, reached, not_reached}, final_distance:
     {q1, median, q3}, min_distance: {q1, median, q3}}``, ``seconds_per_run`` ``{median,
-    max}``, ``provenance`` (:func:`provenance_counts`), and ``episodes_to_recover`` like
+    max}``, ``provenance`` (:func:`provenance_counts`), ``held_for_good`` (how many runs,
+    when the summaries say it: solved and solved again in every later learned episode),
+    and ``episodes_to_recover`` like
     ``episodes_to_solve`` when the summaries have it (a task whose runs recover from a
     change, such as damage, report it).
     """
@@ -160,6 +162,8 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
                             "max": max(seconds) if seconds else None},
         "provenance": provenance_counts(summaries),
     }
+    if any("held_for_good" in s for s in summaries):
+        result["held_for_good"] = sum(1 for s in summaries if s.get("held_for_good"))
     if any("episodes_to_recover" in s for s in summaries):
         recover = [math.inf if s.get("episodes_to_recover") is None
                    else float(s["episodes_to_recover"]) for s in summaries]

@@ -104,6 +104,9 @@ class Task:
             policy_restart_when=s.policy_restart_when,
             policy_restart_from=s.policy_restart_from,
             policy_warm_start=s.policy_warm_start, policy_iters_first=s.policy_iters_first,
+            policy_start_mixture=s.policy_start_mixture,
+            policy_start_mixture_when=s.policy_start_mixture_when,
+            policy_fragile_gap=s.policy_fragile_gap,
             render=not s.no_render, predictions=not s.no_figures, quiet=s.quiet, **task)
 
     #: False when the task changes its system during a run (the adaptation breaks its arm):

@@ -25,7 +25,9 @@ optimisation once its predicted return grew by less than 0.3 % over 10 iteration
 episode was solved).
 
 The run is "solved" when, in a learned episode, the tip stays within 0.1 m of the target
-for the last 10 steps; "success" is the same.
+for the last 10 steps; "success" is *held for good*: solved in a learned episode and in
+every learned episode after it, to the last (a controller that works once and then drops
+the pole is not a success).
 """
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ from typing import List
 import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
+from ..experiment.scoring import held_for_good_rule
 from ..features import angle_features
 from .base import Task
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
@@ -115,6 +118,11 @@ class CartPoleTask(Task):
                          policy_input_noise=s.policy_input_noise == "on")
 
         return build
+
+    def hooks(self, s: CartPoleSettings, env):
+        """Success: held for good, the pole held in the first solved learned episode and
+        in every learned episode after it."""
+        return dict(success_fn=held_for_good_rule(self.config(s)))
 
     def figures(self, exp: Experiment, s: CartPoleSettings) -> List[str]:
         """Distances, predicted vs real cost, one- and multi-step predictions, the final

@@ -180,6 +180,22 @@ class RunSettings:
         "always", "start each policy search from the previous episode's policy always, or "
         "only once an episode was solved (before: from a fresh random policy)",
         choices=("always", "solved"), group="learning")
+    policy_start_mixture: Optional[float] = setting(
+        None, "split the policy objective's start distribution into 2D+1 narrower Gaussians "
+        "of the same mean and covariance, two of them this many standard deviations out "
+        "along each principal axis, so that a policy failing from the flanks of the start "
+        "distribution is seen to fail (0 or None: off; costs 2D+1 times per evaluation)",
+        kind=non_negative_float, group="learning")
+    policy_start_mixture_when: str = setting(
+        "solved", "use --policy-start-mixture in every policy search; only once an episode "
+        "was solved (keeping a policy that works); or, once solved, only when the plain "
+        "search's policy is fragile (its plain expected return above the mixture's by more "
+        "than --policy-fragile-gap)", choices=("always", "solved", "fragile"),
+        group="learning")
+    policy_fragile_gap: float = setting(
+        1.0, "gap between the plain and the start mixture's expected return (in steps at "
+        "full cost) above which a policy is fragile", kind=non_negative_float,
+        group="learning")
     model_min_rel_improvement: Optional[float] = setting(
         None, "stop GP training once its loss fell by less than this fraction of it over "
         "the last 10 iterations (0 or None: never)", kind=float, group="learning")
