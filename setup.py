@@ -25,6 +25,8 @@ setup(
         "gpflow==2.11.2",
         "gymnasium>=1.0,<1.5",
         "tqdm>=4.60",
+        # one BLAS thread in a run: the same rounding alone and in a sweep
+        "threadpoolctl>=3.1",
         "matplotlib>=3.6",
     ],
     extras_require={

@@ -23,7 +23,8 @@ import tempfile
 from typing import Dict, Iterator, List, Mapping, Optional, Union
 
 __all__ = ["TF_LOG_LEVEL", "THREAD_VARIABLES", "quiet_tensorflow", "log_level",
-           "configure_logging", "configure_threads", "thread_environment", "XLA_CACHE_VARIABLE",
+           "configure_logging", "limit_blas_threads", "configure_threads",
+           "thread_environment", "XLA_CACHE_VARIABLE",
            "xla_cache_directory", "use_xla_cache"]
 
 #: ``TF_CPP_MIN_LOG_LEVEL`` unless it is set: TensorFlow's C++ INFO and WARNING lines
@@ -253,8 +254,21 @@ def _positive(threads) -> int:
     return threads
 
 
+def limit_blas_threads() -> None:
+    """One thread for the BLAS libraries loaded in this process (numpy's and scipy's
+    OpenBLAS or MKL, through ``threadpoolctl``), whatever ``OMP_NUM_THREADS`` or
+    ``OPENBLAS_NUM_THREADS`` said when they were loaded. Their work here is small (the
+    policy search's BFGS updates, GP training's L-BFGS-B), but a product split over
+    threads sums in another order: with two threads a run's rounding, and so its path,
+    differs from the same run's with one, as a sweep gives it."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")
+
+
 def configure_threads(threads: Optional[int] = None) -> None:
-    """Size this process's TensorFlow thread pools.
+    """Size this process's TensorFlow thread pools, and the BLAS libraries' to one thread
+    (:func:`limit_blas_threads`), so that a seed gives the same run alone and in a sweep.
 
     ``None`` (a task's process): one intra-op thread unless ``TF_NUM_INTRAOP_THREADS``
     says otherwise (the inter-op pool keeps its default, every CPU): the policy
@@ -269,8 +283,10 @@ def configure_threads(threads: Optional[int] = None) -> None:
     """
     if threads is None:
         os.environ.setdefault("TF_NUM_INTRAOP_THREADS", "1")
+        limit_blas_threads()
         return
     threads = _positive(threads)
+    limit_blas_threads()
     import tensorflow as tf
 
     tf.config.threading.set_intra_op_parallelism_threads(threads)

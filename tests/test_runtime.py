@@ -251,6 +251,16 @@ def test_configure_threads_sets_one_intra_op_thread_unless_told(monkeypatch):
             runtime.configure_threads(bad)
 
 
+def test_configure_threads_leaves_the_blas_libraries_one_thread():
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    import numpy  # noqa: F401 - loads its BLAS
+
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        runtime.configure_threads()
+        blas = [i for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
+        assert blas and all(i["num_threads"] == 1 for i in blas)
+
+
 def test_thread_environment():
     env = runtime.thread_environment(3, {"PATH": "/bin", "OMP_NUM_THREADS": "8"})
     assert env["PATH"] == "/bin"

@@ -41,7 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--output", default=None,
                         help="JSON file to write (default RUN_DIR/diagnosis.json)")
     parser.add_argument("--threads", type=int, default=0,
-                        help="TensorFlow intra- and inter-op threads (0: TensorFlow's default)")
+                        help="TensorFlow intra- and inter-op threads (0: as a run has them, one "
+                             "intra-op thread, so that replayed episodes are the run's own)")
     parser.add_argument("--log-level", default="INFO", type=log_level, help="logging level")
     return parser
 
@@ -55,8 +56,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.threads < 0:
         parser.error(f"--threads must be 0 or more, got {args.threads}")
     configure_logging(args.log_level)
-    if args.threads:
-        configure_threads(args.threads)
+    # 0: the threads of a run (one intra-op thread, BLAS on one), so that a replayed
+    # episode is the run's own
+    configure_threads(args.threads or None)
     from .diagnosis import diagnose, write_diagnosis
     from .reopen import open_run
     from .report import format_report
