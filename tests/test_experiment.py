@@ -428,3 +428,78 @@ def test_success_when_the_last_episode_holds_the_target():
     assert not success(summary((True, held)))  # a random episode does not count
     assert not success(summary((False, [3.0, 0.1, 0.1])))  # fewer steps than hold_steps
     assert not success(summary())
+
+
+def test_held_for_good_needs_every_learned_episode_after_the_first_success():
+    """``held_for_good``: the cart-pole's success, solved in a learned episode and in
+    every learned one after it; ``solved_episodes`` lists the solved learned episodes."""
+    from pilco.experiment.scoring import held_for_good, held_for_good_rule, solved_episodes
+
+    cfg = ExperimentConfig(task="t", env_id="x", episodes=5, solved_rule="hold", hold_steps=2,
+                           success_threshold=0.3)
+    up, down = [3.0, 0.2, 0.1], [3.0, 0.1, 0.9]
+
+    def run(*episodes):
+        records = [{"episode": i + 1, "random": r} for i, (r, _) in enumerate(episodes)]
+        return records, [d for _, d in episodes]
+
+    assert held_for_good(*run((True, up), (False, down), (False, up), (False, up)), cfg)
+    assert solved_episodes(*run((True, up), (False, down), (False, up), (False, up)),
+                           cfg) == [3, 4]  # a random episode that holds does not count
+    assert not held_for_good(*run((True, down), (False, up), (False, down), (False, up)), cfg)
+    assert not held_for_good(*run((True, down), (False, up), (False, up), (False, down)), cfg)
+    assert not held_for_good(*run((True, up), (False, down), (False, down)), cfg)
+    assert not held_for_good(*run((True, up)), cfg)
+    records, distances = run((True, down), (False, up), (False, up))
+    assert held_for_good_rule(cfg)({"episodes": records, "distances": distances})
+
+
+class MixtureAgent(StandInAgent):
+    """A stand-in agent with a start mixture: its expected return is lower from the
+    mixture (the policy is fragile) by ``gap``."""
+
+    gap = 2.0
+
+    def __init__(self, data, **kw):
+        super().__init__(data, **kw)
+        self.start_spread = None
+        self.spreads = []  # the mixture each policy search ran with
+        self.policy_evaluations = 0
+
+    def optimize_policy(self, maxiter, restarts, seed, callback, method, min_rel_improvement,
+                        patience):
+        self.spreads.append(self.start_spread)
+        self.policy_evaluations = 7 if self.start_spread is None else 3
+        return super().optimize_policy(maxiter, restarts, seed, callback, method,
+                                       min_rel_improvement, patience)
+
+    def expected_return(self):
+        return 1.0 - (self.gap if self.start_spread is not None else 0.0)
+
+
+@pytest.mark.parametrize("gap, searched", [(2.0, True), (0.5, False)])
+def test_a_fragile_policy_is_searched_again_on_the_start_mixture(tmp_path, gap, searched):
+    MixtureAgent.gap = gap
+    exp, _ = experiment(tmp_path, config(policy_start_mixture=1.5,
+                                         policy_start_mixture_when="fragile"))
+    agents = []
+
+    def build(data, start_states):  # noqa: ARG001
+        agents.append(MixtureAgent(data))
+        return agents[-1]
+
+    exp.build_agent = build
+    exp.run_random_episode()
+    agent = agents[0]
+    agent.gain = 0.6
+    first = exp.run_learned_episode()  # solves: nothing solved before it, no check
+    assert agent.spreads == [None] and "start_mixture" not in first
+    second = exp.run_learned_episode()  # solved before: the fragility check
+    note = second["start_mixture"]
+    assert note["plain_return"] == 1.0 and note["mixture_return"] == 1.0 - gap
+    assert note["searched"] is searched
+    assert agent.spreads == ([None, None, 1.5] if searched else [None, None])
+    assert second["policy_evaluations"] == (7 + 3 if searched else 7)
+    assert agent.start_spread is None  # the plain objective is left in place
+    with pytest.raises(ValueError, match="policy_start_mixture_when"):
+        config(policy_start_mixture_when="sometimes")
