@@ -175,21 +175,6 @@ def test_the_xla_objective_equals_the_graph_objective():
     _assert_same(xla, graph, 1e-9)
 
 
-@pytest.mark.parametrize("make", [_cartpole_like, _multi_target], ids=["cartpole", "tasks"])
-def test_the_xla_start_mixture_objective_equals_the_graph_one(make):
-    agent = make()
-    agent.start_spread = 1.5
-    rollout = agent._rollout
-    rollout.refresh(agent.mgpr)
-    graph = _value_and_gradient(agent, rollout.mixture_policy_loss)
-    plain = _value_and_gradient(agent, rollout.plain_policy_loss)
-    assert abs(graph[0] - plain[0]) > 1e-6  # the mixture is another objective
-    rollout.refresh(agent.mgpr, pad=True)
-    xla = _compiled_value_and_gradient(agent, rollout.xla_mixture_policy_loss,
-                                       jit_compile=True)
-    _assert_same(xla, graph, 1e-9)
-
-
 def _xla_objective(agent):
     """The optimiser's compiled XLA objective and its gradient (one flat vector, the
     optimiser's packing) at the current policy."""

@@ -56,10 +56,6 @@ class CartPoleSettings(RunSettings):
     cost_width: float = setting(0.25, "width [m] of the saturating cost on the tip distance",
                                 kind=positive_float)
     start_std: float = setting(0.1, "std of the start state", kind=non_negative_float)
-    objective_start_scale: float = setting(
-        1.0, "the policy objective's start distribution is N(0, (scale * start_std)² I): "
-        "wider than the real one (scale > 1), a policy must work from its flanks too",
-        kind=positive_float)
     noise_std: float = setting(0.01, "measurement noise std", kind=non_negative_float)
     threshold: float = setting(0.1, "solved: tip within this distance [m] ...",
                                kind=positive_float)
@@ -118,8 +114,7 @@ class CartPoleTask(Task):
             return PILCO(data, controller,
                          CartPoleReward(pendulum_length=0.5, width=s.cost_width),
                          horizon=s.horizon, m_init=np.zeros((1, 4)),
-                         S_init=(s.objective_start_scale * s.start_std) ** 2 * np.eye(4),
-                         angle_indices=[3],
+                         S_init=s.start_std ** 2 * np.eye(4), angle_indices=[3],
                          policy_input_noise=s.policy_input_noise == "on")
 
         return build
