@@ -112,6 +112,14 @@ def test_diagnose_a_run_directory_writes_every_field(run_dir):
     assert saved["verdict"]["label"] in VERDICTS
     assert verdict(result["facts"]) == result["verdict"]
     assert "Verdict:" in format_report(result)
+    # the policy from other starts: how many meet the rule, and the two objectives
+    starts = saved["starts"]
+    assert starts["starts"] == 20 and 0 <= starts["solved"] <= 20
+    assert starts["solved_fraction"] == pytest.approx(starts["solved"] / 20)
+    assert starts["plain_return"] == pytest.approx(agent.expected_return(), rel=1e-9)
+    agent.start_spread = starts["spread"]
+    assert starts["mixture_return"] == pytest.approx(agent.expected_return(), rel=1e-9)
+    assert "other start states" in format_report(result)
 
 
 def test_an_earlier_episode_is_replayed_with_the_runs_settings(run_dir):

@@ -280,3 +280,40 @@ def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restart
             "best_pred_cost": best["pred_cost"] if best else None, "gain": gain,
             "gain_needed": needed, "better_exists": bool(better),
             "better_solves_real": solves}
+
+
+def start_check(view, number: int, env, starts: int, spread: float = 1.5) -> Dict[str, Any]:
+    """How the episode's policy fares from the whole start distribution: run on the real
+    system from ``starts`` fresh start states (seeds drawn from the run's seed and the
+    episode), the fraction that meets the task's rule; and the policy objective's expected
+    return from the start distribution as one Gaussian (``plain_return``) against its
+    start mixture of ``spread`` (at most sqrt(D); ``mixture_return``,
+    :attr:`pilco.models.PILCO.start_spread`;
+    None for an agent without one). A policy that meets the rule from the episode's own
+    start but from few of the others, with a mixture return well below the plain one, is
+    fragile: the one-Gaussian objective averaged its failing flanks away."""
+    agent, cfg = view.agent, view.config
+    # at most sqrt(D) standard deviations out: the mixture needs spread < sqrt(D + 1/2)
+    spread = min(float(spread), float(np.sqrt(agent.state_dim)))
+    out: Dict[str, Any] = {"starts": int(starts), "solved": None, "solved_fraction": None,
+                           "plain_return": float(agent.expected_return()),
+                           "mixture_return": None, "spread": float(spread)}
+    if hasattr(agent, "start_spread"):
+        before = agent.start_spread
+        try:
+            agent.start_spread = spread
+            out["mixture_return"] = float(agent.expected_return())
+        finally:
+            agent.start_spread = before
+    if env is None or starts <= 0:
+        return out
+    seeds = np.random.default_rng([int(cfg.seed), number, 7]).integers(2 ** 31, size=starts)
+    options = view.reset_options(number) if getattr(view, "reset_options", None) else None
+    solved = []
+    for s in seeds:
+        ep = rollout(env, lambda x: agent.compute_action(x)[0], cfg.steps, seed=int(s),
+                     distance_fn=view.distance_fn, quiet=True, reset_options=options)
+        solved.append(bool(view.episode_solved(ep)))
+    out["solved"] = int(sum(solved))
+    out["solved_fraction"] = float(np.mean(solved))
+    return out

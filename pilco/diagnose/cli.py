@@ -40,6 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "that the saved agent is reproduced)")
     parser.add_argument("--output", default=None,
                         help="JSON file to write (default RUN_DIR/diagnosis.json)")
+    parser.add_argument("--starts", type=int, default=20,
+                        help="run the episode's policy from this many other start states of "
+                             "the task and compare its expected return with the start "
+                             "mixture's (0: not)")
     parser.add_argument("--threads", type=int, default=0,
                         help="TensorFlow intra- and inter-op threads (0: as a run has them, one "
                              "intra-op thread, so that replayed episodes are the run's own)")
@@ -55,6 +59,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parser.parse_args(argv)
     if args.threads < 0:
         parser.error(f"--threads must be 0 or more, got {args.threads}")
+    if args.starts < 0:
+        parser.error(f"--starts must be 0 or more, got {args.starts}")
     configure_logging(args.log_level)
     # 0: the threads of a run (one intra-op thread, BLAS on one), so that a replayed
     # episode is the run's own
@@ -74,7 +80,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         rollouts = False
     try:
         result = diagnose(exp, args.episode, restarts=args.restarts, seed=args.seed,
-                          rollouts=rollouts, replay=args.replay)
+                          rollouts=rollouts, replay=args.replay, starts=args.starts)
     finally:
         exp.close()
     path = write_diagnosis(result, args.output or os.path.join(args.run_dir, "diagnosis.json"))

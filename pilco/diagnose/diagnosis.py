@@ -18,7 +18,7 @@ import numpy as np
 
 from ..files import write_json_atomic
 from .checks import (episode_task, multi_step_check, objective_check, one_step_check,
-                     open_loop_check, optimiser_check)
+                     open_loop_check, optimiser_check, start_check)
 from .geometry import cost_geometry
 from .replay import agent_of_episode
 from .thresholds import Thresholds
@@ -31,13 +31,15 @@ logger = logging.getLogger(__name__)
 
 def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 0,
              rollouts: bool = True, replay: bool = False,
-             thresholds: Thresholds = Thresholds()) -> Dict[str, Any]:
+             thresholds: Thresholds = Thresholds(), starts: int = 20) -> Dict[str, Any]:
     """Diagnose learned episode ``episode`` (1-based, default the last) of the run ``exp``
     (an :class:`~pilco.experiment.Experiment` resumed from its directory): model,
     optimiser and objective checks (:mod:`pilco.diagnose.checks`) and the verdict
     (:mod:`pilco.diagnose.rules`). ``restarts``: policy optimisations from random
     policies; ``rollouts``: run every candidate policy on the real system; ``replay``:
-    rebuild the agent by replaying the run's learning even for the last episode. Returns a
+    rebuild the agent by replaying the run's learning even for the last episode;
+    ``starts``: run the episode's policy from that many other start states
+    (:func:`~pilco.diagnose.checks.start_check`, under ``"starts"``; 0: none). Returns a
     JSON-ready dict (NumPy arrays as arrays)."""
     t_start = time.perf_counter()
     number = len(exp.episodes) if episode is None else int(episode)
@@ -59,6 +61,8 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
         except Exception as err:  # noqa: BLE001 - the rollouts are optional evidence
             logger.warning("the run's environment cannot be made (%s): the candidate "
                            "policies are not run on the real system", err)
+    logger.info("episode %d: the policy from %d other starts", number, starts if env else 0)
+    start = start_check(view, number, env, starts)
     optimiser = optimiser_check(view, number, geometry, restarts, seed, env, thresholds,
                                 episode_task(agent, ep))
     rerun_error = None
@@ -84,7 +88,7 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
         "episode": number, "episodes": len(exp.episodes),
         "success_threshold": exp.config.success_threshold,
         "reconstruction": {**reconstruction, "rerun_distance_error": rerun_error},
-        "model": model, "optimiser": optimiser, "objective": objective,
+        "model": model, "optimiser": optimiser, "objective": objective, "starts": start,
         "facts": facts, "verdict": verdict(facts, thresholds),
         "notes": notes(model, optimiser, reconstruction, rerun_error),
         "thresholds": dataclasses.asdict(thresholds),

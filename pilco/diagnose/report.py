@@ -81,6 +81,16 @@ def format_report(result: Dict[str, Any], every: int = 5) -> str:
                       f"{obj['start_widths']:.2f} cost widths (σ_c {obj['cost_width']:g}); the "
                       f"cost's slope there is {obj['slope_ratio']:.0%} of its maximum (flat "
                       f"below {obj['flat_slope_ratio']:.1%})"]
+    st = result.get("starts")
+    if st:
+        line = f"  expected return from the start distribution {st['plain_return']:.2f}"
+        if st["mixture_return"] is not None:
+            line += (f", from its mixture (spread {st['spread']:g}) {st['mixture_return']:.2f}"
+                     f" (a gap of more than 1 step at full cost: fragile)")
+        lines += ["", "The policy from other starts:", line]
+        if st["solved"] is not None:
+            lines.append(f"  meets the task's rule from {st['solved']} of {st['starts']} "
+                         f"other start states ({st['solved_fraction']:.0%})")
     lines += ["", f"Verdict: {v['label']} (rule {v['rule']}): {v['reason']}"]
     if v.get("caveat"):
         lines.append(f"  caveat: {v['caveat']}")
