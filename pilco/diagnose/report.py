@@ -85,8 +85,10 @@ def format_report(result: Dict[str, Any], every: int = 5) -> str:
     if st:
         line = f"  expected return from the start distribution {st['plain_return']:.2f}"
         if st["mixture_return"] is not None:
-            line += (f", from its mixture (spread {st['spread']:g}) {st['mixture_return']:.2f}"
-                     f" (a gap of more than 1 step at full cost: fragile)")
+            gap = st["plain_return"] - st["mixture_return"]
+            line += (f", from its mixture (spread {st['spread']:g}) {st['mixture_return']:.2f}: "
+                     + ("fragile, the policy fails from the start distribution's flanks"
+                        if gap > 1.0 else "not fragile (a gap of 1 step at full cost or less)"))
         lines += ["", "The policy from other starts:", line]
         if st["solved"] is not None:
             lines.append(f"  meets the task's rule from {st['solved']} of {st['starts']} "
