@@ -29,7 +29,8 @@ TIMEOUT = 600
 EPISODE_KEYS = {"episode", "random", "steps", "cost", "final_distance", "min_distance",
                 "steps_to_target", "seconds", "policy_evaluations"}
 SUMMARY_KEYS = {"task", "seed", "solved", "solved_at_episode", "episodes", "seconds",
-                "complete", "success", "distances", "provenance"}
+                "complete", "success", "distances", "provenance", "solved_episodes",
+                "held_for_good"}
 PHASE_KEYS = {"interaction", "model", "policy"}
 FIGURES = ["distance.png", "cost_prediction.png", "one_step.png", "multi_step.png"]
 
@@ -161,7 +162,13 @@ def test_cartpole_summary_data_figures(runs):
     assert "Controller optimisation" in out and "Whole program" in out
     s = _load_summary(d)
     _check_summary(s, "cartpole", 3)
-    assert s["complete"] is True and s["success"] == s["solved"]
+    # the cart-pole's success: held for good, from the first solved learned episode on
+    learned = [e["episode"] for e in s["episodes"] if not e["random"]]
+    solved = s["solved_episodes"]
+    assert s["solved"] == bool(solved) and (not solved or solved[0] == s["solved_at_episode"])
+    assert s["held_for_good"] == (bool(solved) and solved == [e for e in learned
+                                                              if e >= solved[0]])
+    assert s["complete"] is True and s["success"] == s["held_for_good"]
     _check_data(d, s, 4, 1)
     for name in FIGURES + ["final_episode.gif", "final_episode_strip.png"]:
         assert (d / name).stat().st_size > 0, name

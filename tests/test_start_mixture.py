@@ -75,7 +75,8 @@ def test_objective_is_the_mean_over_the_components(kind, angles):
     np.testing.assert_array_equal(p.expected_returns(), plain)
     loss_again, grad_again = loss_and_grad(p)
     assert loss_again == loss_plain
-    np.testing.assert_array_equal(grad_again, grad_plain)
+    # the same gradient; eager gradients may sum their parts in another order (last bit)
+    np.testing.assert_allclose(grad_again, grad_plain, rtol=0, atol=1e-13)
 
 
 def test_mixture_follows_new_starts_and_its_gradient_matches_differences():
