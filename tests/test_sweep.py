@@ -327,3 +327,14 @@ def test_figures(tmp_path):
     assert figures.distance_bands_figure({"a": [summary(0)]}, str(tmp_path / "x.png")) is None
     assert not (tmp_path / "x.png").exists()
     assert figures.success_rate_figure({"a": []}, str(tmp_path / "y.png")) is None
+
+
+def test_solved_in_episode_falls_when_runs_drop_what_they_learned():
+    from pilco.sweep.aggregate import solved_by_episode, solved_in_episode
+
+    runs = [{"solved_at_episode": 2, "solved_episodes": [2, 4]},  # dropped in episode 3
+            {"solved_at_episode": 3, "solved_episodes": [3, 4]},
+            {"solved_at_episode": None, "solved_episodes": []}]
+    assert solved_in_episode(runs, 4) == [0.0, 1 / 3, 1 / 3, 2 / 3]
+    assert solved_by_episode(runs, 4) == [0.0, 1 / 3, 2 / 3, 2 / 3]
+    assert solved_in_episode([{"solved_at_episode": 2}], 3) is None  # older summaries

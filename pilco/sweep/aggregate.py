@@ -20,6 +20,7 @@ import math
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
 __all__ = ["WILSON_Z95", "wilson_interval", "quantile", "quartiles", "run_success",
+           "solved_in_episode",
            "aggregate_setting", "provenance_counts", "solved_by_episode", "format_table"]
 
 #: the standard normal's 97.5 % quantile: a two-sided 95 % interval
@@ -108,6 +109,18 @@ def solved_by_episode(summaries: Sequence[Mapping[str, Any]], episodes: int) -> 
     n = len(summaries)
     at = [s.get("solved_at_episode") for s in summaries]
     return [(sum(1 for a in at if a is not None and a <= k) / n) if n else math.nan
+            for k in range(1, episodes + 1)]
+
+
+def solved_in_episode(summaries: Sequence[Mapping[str, Any]], episodes: int
+                      ) -> Optional[List[float]]:
+    """Fraction of ``summaries`` whose episode k met the task's rule (its
+    ``solved_episodes``) for k = 1..``episodes``: unlike :func:`solved_by_episode` it falls
+    when runs lose what they had learned. None when a summary does not say."""
+    if not summaries or any("solved_episodes" not in s for s in summaries):
+        return None
+    n = len(summaries)
+    return [sum(1 for s in summaries if k in s["solved_episodes"]) / n
             for k in range(1, episodes + 1)]
 
 

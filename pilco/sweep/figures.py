@@ -15,7 +15,7 @@ from typing import Any, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from .aggregate import solved_by_episode
+from .aggregate import solved_by_episode, solved_in_episode
 
 __all__ = ["success_rate_figure", "distance_bands_figure", "distance_quartiles"]
 
@@ -44,7 +44,8 @@ def _save_and_close(plt, fig, path: str) -> None:
 def success_rate_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], path: str,
                         title: str = "") -> Optional[str]:
     """Draw the fraction solved by episode k for ``{setting: [summary, ...]}`` into
-    ``path``; returns ``path``, or None when no setting has a finished run."""
+    ``path``, and the fraction solved *in* episode k (dashed) where the summaries list
+    their ``solved_episodes`` (runs that drop what they learned pull it down); returns ``path``, or None when no setting has a finished run."""
     settings = {k: v for k, v in summaries.items() if v}
     if not settings:
         logger.info("no finished run: %s not drawn", os.path.basename(path))
@@ -55,13 +56,17 @@ def success_rate_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], pa
         for label, runs in settings.items():
             episodes = max(len(s.get("episodes") or []) for s in runs)
             fractions = solved_by_episode(runs, max(episodes, 1))
-            ax.plot(range(1, len(fractions) + 1), fractions, marker="o",
-                    label=f"{label} ({len(runs)} runs)")
+            line, = ax.plot(range(1, len(fractions) + 1), fractions, marker="o",
+                            label=f"{label} ({len(runs)} runs): solved by episode k")
+            within = solved_in_episode(runs, max(episodes, 1))
+            if within is not None:
+                ax.plot(range(1, len(within) + 1), within, marker="s", linestyle="--",
+                        color=line.get_color(), label=f"{label}: solved in episode k")
         from matplotlib.ticker import MaxNLocator
 
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("episode k")
-        ax.set_ylabel("fraction of runs solved by episode k")
+        ax.set_ylabel("fraction of runs")
         ax.set_ylim(-0.02, 1.02)
         ax.grid(alpha=0.3)
         ax.legend(fontsize="small")
