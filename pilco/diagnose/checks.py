@@ -207,6 +207,15 @@ def objective_check(agent, episode: Episode, geometry: Optional[CostGeometry],
             "flat": bool(widths > thresholds.flat_widths)}
 
 
+def _on_system(view, number: int, env, seed: int) -> Episode:
+    """Episode ``number``'s setting (its reset options) run on the real system ``env`` with
+    the agent's current policy from the start of ``seed``."""
+    agent = view.agent
+    options = view.reset_options(number) if getattr(view, "reset_options", None) else None
+    return rollout(env, lambda x: agent.compute_action(x)[0], view.config.steps, seed=seed,
+                   distance_fn=view.distance_fn, quiet=True, reset_options=options)
+
+
 def _candidate(view, number: int, geometry: Optional[CostGeometry], kind: str,
                seed: Optional[int], env, seconds: float = 0.0,
                task: Optional[int] = None) -> Dict[str, Any]:
@@ -221,10 +230,7 @@ def _candidate(view, number: int, geometry: Optional[CostGeometry], kind: str,
         out["pred_final_distance"] = float(pred["distance_mean"][-1])
         out["pred_min_distance"] = float(np.min(pred["distance_mean"][1:]))
     if env is not None:
-        options = view.reset_options(number) if getattr(view, "reset_options", None) else None
-        ep = rollout(env, lambda x: agent.compute_action(x)[0], cfg.steps,
-                     seed=view.episode_seed(number), distance_fn=view.distance_fn, quiet=True,
-                     reset_options=options)
+        ep = _on_system(view, number, env, view.episode_seed(number))
         out["real_distance"] = ep.distances
         out["real_final_distance"] = float(ep.distances[-1])
         out["real_min_distance"] = float(np.min(ep.distances[1:])) if ep.steps else None
@@ -308,12 +314,7 @@ def start_check(view, number: int, env, starts: int, spread: float = 1.5) -> Dic
     if env is None or starts <= 0:
         return out
     seeds = np.random.default_rng([int(cfg.seed), number, 7]).integers(2 ** 31, size=starts)
-    options = view.reset_options(number) if getattr(view, "reset_options", None) else None
-    solved = []
-    for s in seeds:
-        ep = rollout(env, lambda x: agent.compute_action(x)[0], cfg.steps, seed=int(s),
-                     distance_fn=view.distance_fn, quiet=True, reset_options=options)
-        solved.append(bool(view.episode_solved(ep)))
+    solved = [bool(view.episode_solved(_on_system(view, number, env, int(s)))) for s in seeds]
     out["solved"] = int(sum(solved))
     out["solved_fraction"] = float(np.mean(solved))
     return out

@@ -99,9 +99,8 @@ def _unless_fragile(exp, number: int, spread: float, plain: float, search) -> fl
                         "mixture", number, plain, mixed)
             best = search("policy (start mixture)", 1)
             note["searched_return"] = float(best)
-            note["extra_evaluations"] = evaluations
-            exp.policy_notes = {"start_mixture": note,
-                                "extra_evaluations": note.pop("extra_evaluations")}
+            # the record counts the plain search's evaluations too
+            exp.policy_notes = {"start_mixture": note, "extra_evaluations": evaluations}
             return best
         exp.policy_notes = {"start_mixture": note}
         return plain

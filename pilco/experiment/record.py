@@ -158,9 +158,9 @@ class RunRecord:
             if policy_evaluations is None else int(policy_evaluations)
         if not episode.random and self.policy_notes:
             notes = dict(self.policy_notes)
+            extra = int(notes.pop("extra_evaluations", 0))
             if rec["policy_evaluations"] is not None:
-                rec["policy_evaluations"] += int(notes.pop("extra_evaluations", 0))
-            notes.pop("extra_evaluations", None)
+                rec["policy_evaluations"] += extra
             rec.update(notes)
         self.policy_notes = {}
         self.records.append(rec)

@@ -53,8 +53,12 @@ def solved_episodes(records, distances, config: ExperimentConfig) -> List[int]:
 def held_for_good(records, distances, config: ExperimentConfig) -> bool:
     """Whether the task was solved in a learned episode and in every learned episode
     after it, to the run's last: a controller that, once it works, keeps working."""
+    return _held_from_first(records, solved_episodes(records, distances, config))
+
+
+def _held_from_first(records, solved: List[int]) -> bool:
+    """:func:`held_for_good` given the run's ``solved`` learned episodes."""
     learned = [int(r["episode"]) for r in records if not r["random"]]
-    solved = solved_episodes(records, distances, config)
     return bool(solved) and solved == [e for e in learned if e >= solved[0]]
 
 
@@ -102,8 +106,8 @@ def episode_record(episode: Episode, number: int, seconds: Dict[str, float],
 def summarise(exp) -> Dict[str, Any]:
     """The summary (``summary.json``) of :class:`~pilco.experiment.Experiment` ``exp``:
     task, seed, ``solved``, ``solved_at_episode``, ``solved_episodes`` (the learned
-    episodes that met the rule), ``held_for_good`` (:func:`held_for_good`), the episode records, ``seconds`` per
-    phase and ``total`` wall time (all sessions; figures excluded), the task's
+    episodes that met the rule), ``held_for_good`` (:func:`held_for_good`), the episode
+    records, ``seconds`` per phase and ``total`` wall time (all sessions; figures excluded), the task's
     ``summary_fields``, ``complete`` (the loop finished), ``distances`` per episode and
     ``success`` (the task's rule, default ``solved``) and ``provenance`` (code version,
     library versions, CPU, TensorFlow's arithmetic settings: :mod:`.provenance`)."""
@@ -120,7 +124,8 @@ def summarise(exp) -> Dict[str, Any]:
         "distances": [[float(v) for v in e.distances] for e in exp.episodes],
         "provenance": provenance(),
     }
-    summary["solved_episodes"] = solved_episodes(exp.records, summary["distances"], exp.config)
-    summary["held_for_good"] = held_for_good(exp.records, summary["distances"], exp.config)
+    solved = solved_episodes(exp.records, summary["distances"], exp.config)
+    summary["solved_episodes"] = solved
+    summary["held_for_good"] = _held_from_first(exp.records, solved)
     summary["success"] = bool(exp.success_fn(summary) if exp.success_fn else summary["solved"])
     return summary

@@ -45,7 +45,8 @@ def success_rate_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], pa
                         title: str = "") -> Optional[str]:
     """Draw the fraction solved by episode k for ``{setting: [summary, ...]}`` into
     ``path``, and the fraction solved *in* episode k (dashed) where the summaries list
-    their ``solved_episodes`` (runs that drop what they learned pull it down); returns ``path``, or None when no setting has a finished run."""
+    their ``solved_episodes`` (runs that drop what they learned pull it down); returns
+    ``path``, or None when no setting has a finished run."""
     settings = {k: v for k, v in summaries.items() if v}
     if not settings:
         logger.info("no finished run: %s not drawn", os.path.basename(path))
