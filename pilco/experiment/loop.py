@@ -169,8 +169,13 @@ class Experiment(RunRecord):
                 self.episodes.pop()
         return self._add_episode(ep, {"interaction": ep.seconds}, {})
 
-    def run_learned_episode(self) -> Dict[str, Any]:
-        """Train the model, optimise the policy, run it for one episode, store everything."""
+    def run_learned_episode(self, watch: Optional[Callable[[Callable], Callable]] = None
+                            ) -> Dict[str, Any]:
+        """Train the model, optimise the policy, run it for one episode, store everything.
+
+        ``watch``: ``policy_fn -> policy_fn``, wraps the agent's policy ``x [D] -> u [U]``
+        for this episode's interaction (a task that watches the states as they come, and
+        may change the agent mid-episode, e.g. re-plan); its time counts as interaction."""
         if self.agent is None:
             raise RuntimeError("no agent yet: run the random episodes first")
         number = len(self.episodes) + 1
@@ -186,7 +191,11 @@ class Experiment(RunRecord):
         evaluations = getattr(self.agent, "policy_evaluations", None)
         prediction = predictions_before(self)
         agent = self.agent
-        ep = self._interact(number, lambda x: agent.compute_action(x)[0])
+
+        def policy(x):  # the agent's policy of the moment (a watch may change it)
+            return agent.compute_action(x)[0]
+
+        ep = self._interact(number, policy if watch is None else watch(policy))
         seconds["interaction"] = ep.seconds
         prediction.update(predictions_after(self, ep))
         return self._add_episode(ep, seconds, prediction, evaluations)

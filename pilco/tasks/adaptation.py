@@ -39,8 +39,9 @@ from typing import Any, Dict, List, Optional
 
 from ..experiment import Experiment
 from . import reacher, reacher_agent
-from .adaptation_model import (_stop_commanding, damaged_arm_data, learn_the_flag,
-                               per_output_noise, stop_stuck_joints, track_damage_data)
+from .adaptation_model import (ReplanWhenStuck, _stop_commanding, damaged_arm_data,
+                               learn_the_flag, per_output_noise, stop_stuck_joints,
+                               track_damage_data)
 from .settings import non_negative_int, positive_float, positive_int, setting, task_settings
 
 __all__ = ["AdaptationSettings", "AdaptationTask", "ADAPTATION", "damage", "replay_damage",
@@ -52,23 +53,17 @@ logger = logging.getLogger(__name__)
 RECOVER_WITHIN = 3
 
 
-# The healthy reacher's fine cost (--fine-cost-width 0.05) stays, it rewards precision near
-# the target on the damaged arm too; not its joint-limit cost, with which the damaged
-# episodes ended short of the target (docs/success-rates.md, "What was tried"), nor its
-# wide start distribution in the first learned episode, its policy initialised near the
-# start state or its early stop of the policy search (none helped the adaptation, or
-# none was measured on it). The elbow breaks where it is (stuck at its start angle), so
-# the arm starts where the healthy one did and the healthy cost width still applies
-# (--damage-mode straight straightens it, 1.17 m from the target: add --cost-width 0.4).
-# --episodes is derived: random + healthy + damaged episodes.
-@task_settings(limit_cost=0.0, early_start_var=0.0, policy_init_var=0.0,
-               policy_min_rel_improvement=None, policy_patience=10, episodes=None,
-               output="runs/adaptation-seed{seed}")
+# The healthy phase is the reacher task's learning: every setting below not named here
+# is the reacher's default (its costs, its wide first start distribution, its policy
+# initialised near the start, its early stop), and the healthy episodes are the reacher's
+# learned-episode budget. --episodes is derived: random + healthy + damaged episodes.
+@task_settings(episodes=None, output="runs/adaptation-seed{seed}")
 class AdaptationSettings(reacher.ReacherSettings):
     """The adaptation's settings: the reacher's, the damage and the episode budgets."""
 
-    healthy_episodes: int = setting(4, "at most this many learned episodes before the damage",
-                                    kind=non_negative_int, group="adaptation")
+    healthy_episodes: int = setting(
+        reacher.LEARNED_EPISODES, "at most this many learned episodes before the damage "
+        "(the reacher's budget)", kind=non_negative_int, group="adaptation")
     min_healthy_episodes: int = setting(
         1, "learned episodes on the healthy arm before the damage even when an earlier one "
         "reached (more healthy data for the model; at most --healthy-episodes)",
@@ -114,6 +109,15 @@ class AdaptationSettings(reacher.ReacherSettings):
         0.1, "a joint counts as stuck when the sum of its measured rotations over the first "
         "damaged episode is below R times the sum of its commanded ones", kind=positive_float,
         metavar="R", group="adaptation")
+    replan_stuck_joints: bool = setting(
+        True, "in the first damaged episode, watch the joints: once one that followed its "
+        "commands on the healthy arm stops following them (as --stop-stuck-joints judges, "
+        "on the steps so far), pause the episode, stop commanding it and search the policy "
+        "again from the state reached, then go on (--no-replan-stuck-joints: wait for the "
+        "episode's end)", negatable=True, group="adaptation")
+    stuck_check_steps: int = setting(
+        3, "steps of the first damaged episode before its joints are judged",
+        kind=positive_int, metavar="K", group="adaptation")
     damaged_policy_restarts: int = setting(
         1, "from the second damaged episode on (the first one's model knows only the "
         "healthy arm), run each policy search from the previous policy and from N - 1 "
@@ -217,6 +221,15 @@ def run_healthy(exp: Experiment, s: AdaptationSettings) -> None:
         solved = solved or exp.episode_solved(exp.episodes[-1])
 
 
+def _watch(exp: Experiment, s: AdaptationSettings, first: int):
+    """The first damaged episode's :class:`ReplanWhenStuck` (with ``--replan-stuck-joints``
+    and ``--stop-stuck-joints``, while no joint was judged yet), else None."""
+    if (s.replan_stuck_joints and s.stop_stuck_joints
+            and exp.summary_fields.get("stuck_joints") is None):
+        return ReplanWhenStuck(exp, s, first, len(exp.episodes) + 1)
+    return None
+
+
 def run(exp: Experiment, s: AdaptationSettings) -> Dict[str, Any]:
     """Healthy episodes until one reaches, the damage, damaged episodes until the arm
     reaches again (or their budget is spent); resumable at any episode."""
@@ -246,7 +259,7 @@ def run(exp: Experiment, s: AdaptationSettings) -> Dict[str, Any]:
         while len(exp.episodes) - first + 1 < s.damaged_episodes:
             if fields["episodes_to_recover"] is not None and not s.no_stop_when_recovered:
                 break
-            exp.run_learned_episode()
+            exp.run_learned_episode(watch=_watch(exp, s, first))
             fields["episodes_to_recover"] = _recovered_after(exp, first)
             per_output_noise(exp, s, first)
             stop_stuck_joints(exp, s, first)

@@ -16,7 +16,8 @@ if TYPE_CHECKING:  # the settings class lives with the task, which imports this 
     from .adaptation import AdaptationSettings
 
 __all__ = ["DATA_STATE", "track_damage_data", "damaged_arm_data", "learn_the_flag", "output_disagreement", "per_output_noise", "joint_follow_ratios",
-           "stuck_joints", "stop_stuck_joints", "HEALTHY_FOLLOW_RATIO"]
+           "stuck_joints", "stop_stuck_joints", "ReplanWhenStuck", "MIN_COMMANDED_ROTATION",
+           "HEALTHY_FOLLOW_RATIO"]
 
 logger = logging.getLogger(__name__)
 
@@ -187,6 +188,99 @@ def _stop_commanding(agent, joints: Sequence[int]) -> None:
     agent.retrace()  # the compiled functions hold the old bounds as constants
 
 
+class ReplanWhenStuck:
+    """The policy of the first damaged episode, watching the joints as the episode runs
+    (``--replan-stuck-joints``): from step ``--stuck-check-steps`` on, once a joint that
+    followed its commands on the healthy arm has been commanded at least
+    :data:`MIN_COMMANDED_ROTATION` rad and moved less than ``--stuck-joint-ratio`` of it
+    (:func:`stuck_joints` on the steps so far), the episode pauses, as an arm can hold its
+    pose: the joint is no longer commanded and the healthy arm's transitions describe the
+    damaged arm (as :func:`stop_stuck_joints` does after an episode), the policy is searched
+    again from the state reached (start mean the current state, the run's start
+    covariance, the episode's policy budget and early stop), and the episode continues
+    with the new policy. Replans at most once; the agent's start state is restored after
+    the search. The episode's record gets a ``replanned`` note (step, joints, predicted
+    return, seconds). A replay of the run's learning (``python -m pilco.diagnose``) does
+    not redo the pause: its next policy search starts from the policy before it.
+
+    Use as ``exp.run_learned_episode(watch=ReplanWhenStuck(exp, s, first, number))``."""
+
+    def __init__(self, exp: Experiment, s: AdaptationSettings, first: int, number: int):
+        self.exp, self.s, self.first, self.number = exp, s, first, number
+        self.joint_dims = list(exp.make_env().unwrapped.joint_dims)
+        self.states: List[np.ndarray] = []
+        self.actions: List[np.ndarray] = []
+        self.replanned = False
+
+    def __call__(self, policy):
+        def watched(x):
+            x = np.asarray(x, dtype=np.float64).reshape(-1)
+            self.states.append(x)
+            if not self.replanned and len(self.actions) >= self.s.stuck_check_steps:
+                joints = self._stuck()
+                if joints:
+                    self.replanned = True
+                    self._replan(joints, x)
+            u = np.asarray(policy(x), dtype=np.float64).reshape(-1)
+            self.actions.append(u)
+            return u
+
+        return watched
+
+    def _stuck(self) -> List[int]:
+        from types import SimpleNamespace
+
+        so_far = SimpleNamespace(states=np.array(self.states), actions=np.array(self.actions))
+        commanded = np.sum(np.abs(so_far.actions), axis=0)
+        joints = stuck_joints(self.exp.episodes[:self.first - 1], [so_far],
+                              self.s.stuck_joint_ratio, self.joint_dims)
+        return [j for j in joints if commanded[j] >= MIN_COMMANDED_ROTATION]
+
+    def _replan(self, joints: List[int], x: np.ndarray) -> None:
+        import time
+        from types import SimpleNamespace
+
+        exp, agent, cfg = self.exp, self.exp.agent, self.exp.config
+        t0 = time.perf_counter()
+        step = len(self.actions)
+        so_far = SimpleNamespace(states=np.array(self.states), actions=np.array(self.actions))
+        _mark_stuck(exp, joints, joint_follow_ratios([so_far], self.joint_dims), self.first)
+        _stop_commanding(agent, joints)
+        start = agent.m_init
+        agent.m_init = x[None, :]
+        solved = exp.solved_at_episode() is not None
+        try:
+            expected = agent.optimize_policy(
+                maxiter=cfg.policy_iterations(self.number), seed=exp.episode_seed(self.number),
+                method=cfg.policy_method, min_rel_improvement=cfg.policy_early_stop_at(solved),
+                patience=cfg.policy_patience,
+                **({"jit_compile": True} if cfg.policy_compiler == "xla" else {}))
+        finally:
+            agent.m_init = start
+        seconds = time.perf_counter() - t0
+        exp.policy_notes["replanned"] = {"step": step, "stuck_joints": joints,
+                                         "predicted_return": float(expected),
+                                         "seconds": round(seconds, 2)}
+        logger.info("episode %d: joint(s) %s stuck after %d steps; re-planned from the state "
+                    "reached without them in %.1f s (predicted return %.3f)", self.number,
+                    joints, step, seconds, expected)
+
+
+#: a joint is judged stuck mid-episode only once it was commanded at least this far [rad]
+MIN_COMMANDED_ROTATION = 0.05
+
+
+def _mark_stuck(exp: Experiment, joints: List[int], ratios: np.ndarray, first: int) -> None:
+    """Record ``joints`` (action indices) as stuck from the damaged episode ``first`` on:
+    the summary's ``stuck_joints`` and ``joint_follow_ratio``, the data state's inert
+    actions, the healthy transitions as equals (noise factor 1)."""
+    exp.summary_fields["joint_follow_ratio"] = [float(r) for r in ratios]
+    exp.summary_fields["stuck_joints"] = list(joints)
+    if joints:
+        track_damage_data(exp).update(inert_actions=list(joints), inert_from_episode=first,
+                                      older_noise_scale=1.0)
+
+
 def stop_stuck_joints(exp: Experiment, s: AdaptationSettings, first: int) -> None:
     """With ``--stop-stuck-joints``, once the first damaged episode (``first``) ran and
     before the model learns from it: the joints :func:`stuck_joints` finds are no longer
@@ -205,13 +299,10 @@ def stop_stuck_joints(exp: Experiment, s: AdaptationSettings, first: int) -> Non
         joints = stuck_joints(exp.episodes[:first - 1], exp.episodes[first - 1:first],
                               s.stuck_joint_ratio, joint_dims)
         ratios = joint_follow_ratios(exp.episodes[first - 1:first], joint_dims)
-        fields["joint_follow_ratio"] = [float(r) for r in ratios]
-        fields["stuck_joints"] = joints
+        _mark_stuck(exp, joints, ratios, first)
         logger.info("joints' measured over commanded rotation in the first damaged episode "
                     "%s; stuck (action indices): %s", np.round(ratios, 3), joints or "none")
         if joints:
-            state.update(inert_actions=joints, inert_from_episode=first,
-                         older_noise_scale=1.0)
             exp.give_agent_data(exp.agent)
     if state["inert_actions"]:
         _stop_commanding(exp.agent, state["inert_actions"])

@@ -78,7 +78,7 @@ from .settings import (RunSettings, non_negative_float, positive_float, positive
 
 __all__ = ["ReacherSettings", "DamagedReacherSettings", "ReacherTask", "REACHER",
            "DAMAGED_REACHER", "env_kwargs", "reached_within", "SUCCESS_STEPS", "draw_target",
-           "check_drawn_target", "PAPER_CODE", "PAPER_CODE_DAMAGED"]
+           "check_drawn_target", "PAPER_CODE", "PAPER_CODE_DAMAGED", "LEARNED_EPISODES"]
 
 
 #: Paper figures of the reacher (its own machine, with a GPU).
@@ -104,8 +104,12 @@ TARGET_STREAM = 3
 #: success: the last episode reaches the target within this many steps
 SUCCESS_STEPS = 15
 
+#: the reacher's learned episodes (its --episodes minus --random-episodes); the
+#: adaptation's healthy arm gets the same budget
+LEARNED_EPISODES = 3
 
-@task_settings(episodes=4, horizon=50, basis_functions=50, policy_iters=25, model_iters=100,
+
+@task_settings(episodes=1 + LEARNED_EPISODES, horizon=50, basis_functions=50, policy_iters=25, model_iters=100,
                policy_min_rel_improvement=0.01, policy_patience=5,
                output="runs/reacher-seed{seed}")
 class ReacherSettings(RunSettings):
