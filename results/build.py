@@ -78,8 +78,8 @@ EPISODE_FIELDS = ("episode", "random", "steps", "min_distance", "final_distance"
 #: summary fields kept per run when present: the adaptation's damage and recovery, the
 #: multi-target reacher's held-out test (steps per test target, how many within the rule),
 #: whether a run held its first success to the end and which learned episodes were solved
-TASK_FIELDS = ("damage_at_episode", "episodes_to_recover", "test_steps", "test_reached",
-               "held_for_good", "solved_episodes")
+TASK_FIELDS = ("healthy_reached_at_episode", "damage_at_episode", "episodes_to_recover",
+               "test_steps", "test_reached", "held_for_good", "solved_episodes")
 RUN_FIELDS = ("setting", "seed", "success", "solved", "solved_at_episode", "seconds",
               "episodes", "distances")
 
@@ -91,7 +91,8 @@ END = "<!-- /results-table -->"
 #: marks the cells of a row typed into table.json instead of computed from an export
 MANUAL_MARK = "†"
 
-TABLE_KEYS = {"task", "label", "rule", "goal", "more", "setting", "data", "manual"}
+TABLE_KEYS = {"task", "label", "rule", "goal", "more", "setting", "data", "manual",
+              "scratch"}
 
 #: separates a task from a variant's name in an export's file name: a task can have
 #: several exports (e.g. the same sweep with oneDNN on and off), ``<task>--<variant>.json``
@@ -461,8 +462,10 @@ def result_text(aggregate: Mapping[str, Any]) -> str:
     """The result cell: successes of the finished runs, the median episode solved and
     the runs that did not finish."""
     text = f"**{aggregate['successes']}/{aggregate['finished']}**"
-    solve = aggregate["episodes_to_solve"]
-    if solve["median"] is not None:
+    solve, recover = aggregate["episodes_to_solve"], aggregate.get("episodes_to_recover")
+    if recover is not None and recover["median"] is not None:
+        text += f", recovered after {recover['median']:g} damaged episode(s) median"
+    elif solve["median"] is not None:
         text += f", solved at episode {solve['median']:g} median"
     elif solve["solved"] == 0:
         text += ", none solved"
@@ -514,9 +517,71 @@ def table_row(row: Mapping[str, Any], exports: Mapping[str, Mapping[str, Any]],
         raise ValueError(f"{_show(path)} has no setting {setting!r} (it has "
                          f"{', '.join(settings_of(data))}); set the row's 'setting' in "
                          "results/table.json")
+    more = row.get("more", "")
+    if "scratch" in row:
+        more = "; ".join(m for m in (more, scratch_text(data, exports, row["scratch"],
+                                                         setting)) if m)
     return [row["label"], row["rule"], seed_ranges(export_seeds(data, setting)),
-            result_text(aggregate), row.get("more", ""), per_run_text(aggregate),
-            row["goal"]]
+            result_text(aggregate), more, per_run_text(aggregate), row["goal"]]
+
+
+def paired_recovery(data: Mapping[str, Any], scratch: Mapping[str, Any],
+                    setting: str = "default") -> List[Dict[str, Any]]:
+    """Per seed of the adaptation export ``data`` (its ``setting``) that the from-scratch
+    export ``scratch`` (its default setting) also ran: ``seed``,
+    ``healthy_reached_at_episode`` ("–" for a run exported without it),
+    ``episodes_to_recover`` (damaged episodes, counting the
+    one that reached; None: not within the run) and ``scratch_solved_at_episode`` (the
+    from-scratch run's first solved episode, counting its random ones: the episodes it
+    spent on the damaged arm; None: never)."""
+    theirs = {r["seed"]: r for r in scratch["runs"] if r["setting"] == "default"}
+    return [{"seed": r["seed"],
+             "healthy_reached_at_episode": r.get("healthy_reached_at_episode", "–"),
+             "episodes_to_recover": r.get("episodes_to_recover"),
+             "scratch_solved_at_episode": theirs[r["seed"]]["solved_at_episode"]}
+            for r in sorted(data["runs"], key=lambda r: r["seed"])
+            if r["setting"] == setting and r["seed"] in theirs]
+
+
+def _median(values: Sequence[float]) -> Optional[float]:
+    import math
+
+    if not values:
+        return None
+    ordered = sorted(math.inf if v is None else v for v in values)
+    k = len(ordered) // 2
+    return ordered[k] if len(ordered) % 2 else (ordered[k - 1] + ordered[k]) / 2
+
+
+def scratch_text(data: Mapping[str, Any], exports: Mapping[str, Mapping[str, Any]],
+                 scratch: str, setting: str) -> str:
+    """The adaptation's recovery against learning the damaged arm from scratch on the same
+    seeds (a row's ``scratch`` export): episodes on the damaged arm, medians (a run that
+    never reached counts as infinitely many)."""
+    if scratch not in exports:
+        raise FileNotFoundError(f"results/{scratch}.json: no such export, but a row of "
+                                f"results/table.json compares with it ('scratch')")
+    pairs = paired_recovery(data, exports[scratch], setting)
+    if not pairs:
+        return f"no seed in common with `{scratch}`"
+    ours = _median([p["episodes_to_recover"] for p in pairs])
+    theirs = _median([p["scratch_solved_at_episode"] for p in pairs])
+    return (f"on the damaged arm: {ours:g} episode(s) median to reach again, against "
+            f"{theirs:g} learning from scratch (`{scratch}`, the same {len(pairs)} seeds)")
+
+
+def pairs_table(data: Mapping[str, Any], scratch: Mapping[str, Any],
+                setting: str = "default") -> str:
+    """:func:`paired_recovery` as a Markdown table."""
+    def cell(v):
+        return "never" if v is None else str(v)
+
+    lines = ["| seed | healthy arm reached in episode | damaged episodes to reach again | "
+             "from scratch: solved in episode |", "|---|---|---|---|"]
+    lines += [f"| {p['seed']} | {cell(p['healthy_reached_at_episode'])} | "
+              f"{cell(p['episodes_to_recover'])} | {cell(p['scratch_solved_at_episode'])} |"
+              for p in paired_recovery(data, scratch, setting)]
+    return "\n".join(lines) + "\n"
 
 
 def source_line(row: Mapping[str, Any], data: Mapping[str, Any]) -> str:
@@ -660,8 +725,20 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     render.add_argument("--check", action="store_true",
                         help="write nothing; status 1 when the README's table is stale")
     render.add_argument("--no-figures", action="store_true", help="leave docs/figures/")
+    pairs = commands.add_parser(
+        "pairs", help="per seed: the adaptation's damaged episodes to reach again against "
+                      "the episodes to solve from scratch (Markdown)")
+    pairs.add_argument("adaptation", help="an export's name, e.g. adaptation")
+    pairs.add_argument("scratch", help="an export's name, e.g. damaged_reacher")
     args = parser.parse_args(argv)
     try:
+        if args.command == "pairs":
+            exports = load_exports()
+            for name in (args.adaptation, args.scratch):
+                if name not in exports:
+                    raise FileNotFoundError(f"results/{name}.json: no such export")
+            print(pairs_table(exports[args.adaptation], exports[args.scratch]), end="")
+            return 0
         if args.command == "export":
             return export_main(args.sweeps, variant=args.variant)
         return render_main(check=args.check, figures=not args.no_figures)

@@ -166,7 +166,8 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
         damage_mode="stuck", drop_old_data=False, no_stop_when_recovered=False,
         min_healthy_episodes=1, damaged_cost="all", damage_input=False,
         old_data_noise=100.0, damaged_policy_restarts=restarts, changed_output_noise=None,
-        changed_output_threshold=10.0, stop_stuck_joints=stop, stuck_joint_ratio=0.1)
+        changed_output_threshold=10.0, stop_stuck_joints=stop, stuck_joint_ratio=0.1,
+        replan_stuck_joints=False)  # a re-planned episode is not replayed (its docstring)
     exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
                      model_data=adaptation_model.damaged_arm_data)
     exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None}
@@ -333,3 +334,92 @@ def test_older_episodes_are_down_weighted_against_newer_ones_only(train_from, ma
         np.testing.assert_array_equal(X[-2:, 2 + 1], 0.0)
         np.testing.assert_array_equal(X[:n - 2, 2 + 1], 0.5)
     assert np.all(episodes[2].actions == 0.5)
+
+
+def replan_args(**kw):
+    base = dict(stop_stuck_joints=True, stuck_joint_ratio=0.1, stuck_check_steps=3)
+    base.update(kw)
+    return argparse.Namespace(**base)
+
+
+def _healthy_run(tmp_path):
+    """Two healthy random episodes and a fitted model, as before the first damaged
+    episode (episode 3): the point where the replanning watch runs."""
+    cfg = ExperimentConfig(task="plane", env_id="unused", seed=1, episodes=4,
+                           random_episodes=2, steps=12, random_action_scale=0.3,
+                           predictions=False, quiet=True, render=False, policy_iters=5)
+    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
+                     model_data=adaptation_model.damaged_arm_data)
+    PlaneEnv.broken = False
+    exp.run_random_episode()
+    exp.run_random_episode()
+    exp.agent.optimize_models(maxiter=100)
+    exp.agent.controller.max_action = np.array([0.5, 0.5])
+    exp.agent.controller.b.assign([[0.3, 0.3]])  # both actuators clearly commanded
+    exp.agent.retrace()
+    return exp
+
+
+@pytest.mark.parametrize("broken", [True, False])
+def test_the_first_damaged_episode_replans_once_a_joint_is_stuck(tmp_path, monkeypatch,
+                                                                 broken):
+    """On the broken plane the watch finds the first actuator stuck after 3 steps, stops
+    commanding it, searches the policy from the state reached (the agent's start state
+    is restored after) and the episode goes on with it; on the healthy plane it only
+    watches."""
+    exp = _healthy_run(tmp_path)
+    agent = exp.agent
+    start = agent.m_init.copy()
+    searched = []
+    search = agent.optimize_policy
+
+    def optimize_policy(**kw):
+        searched.append((agent.m_init.copy(), kw["maxiter"]))
+        return search(**kw)
+
+    monkeypatch.setattr(agent, "optimize_policy", optimize_policy)
+    PlaneEnv.broken = broken
+    try:
+        watch = adaptation_model.ReplanWhenStuck(exp, replan_args(), first=3, number=3)
+        exp.policy_notes = {}
+        ep = exp._interact(3, watch(lambda x: agent.compute_action(x)[0]))
+    finally:
+        PlaneEnv.broken = False
+    np.testing.assert_array_equal(agent.m_init, start)
+    if not broken:
+        assert searched == [] and "replanned" not in exp.policy_notes
+        assert "stuck_joints" not in exp.summary_fields
+        assert np.all(ep.actions[:, 0] != 0.0)
+        return
+    assert np.all(np.abs(ep.actions[:3, 0]) > 0.0)  # commanded while it was watched
+    np.testing.assert_array_equal(ep.actions[3:, 0], 0.0)  # then no longer
+    np.testing.assert_array_equal(ep.states[:, 0], ep.states[0, 0])  # it never moved
+    assert len(searched) == 1
+    np.testing.assert_array_equal(searched[0][0], ep.states[3][None, :])  # from there
+    assert searched[0][1] == exp.config.policy_iterations(3)
+    note = exp.policy_notes["replanned"]
+    assert note["step"] == 3 and note["stuck_joints"] == [0]
+    assert exp.summary_fields["stuck_joints"] == [0]
+    assert exp.task_state["inert_actions"] == [0] and exp.task_state["inert_from_episode"] == 3
+    # the episode's record keeps the note; the model sees the stuck commands as 0
+    exp._add_episode(ep, {"interaction": ep.seconds}, {})
+    assert exp.records[-1]["replanned"]["stuck_joints"] == [0]
+    np.testing.assert_array_equal(agent.data[0][50:, 2], 0.0)
+    # after the episode, stop_stuck_joints keeps the joints found mid-episode
+    adaptation_model.stop_stuck_joints(exp, stuck_args(), first=3)
+    assert exp.summary_fields["stuck_joints"] == [0]
+    np.testing.assert_array_equal(agent.controller.max_action, [0.0, 0.5])
+
+
+def test_the_adaptation_watches_only_its_first_damaged_episode():
+    run = argparse.Namespace(summary_fields={}, episodes=[1, 2], make_env=PlaneEnv)
+    on = ADAPTATION.parse(["--output", "x"])
+    assert on.replan_stuck_joints and on.stuck_check_steps == 3
+    watch = adaptation._watch(run, on, first=3)
+    assert isinstance(watch, adaptation_model.ReplanWhenStuck) and watch.number == 3
+    assert adaptation._watch(run, ADAPTATION.parse(["--no-replan-stuck-joints", "--output",
+                                                    "x"]), first=3) is None
+    assert adaptation._watch(run, ADAPTATION.parse(["--no-stop-stuck-joints", "--output",
+                                                    "x"]), first=3) is None
+    run.summary_fields["stuck_joints"] = []  # judged after the first damaged episode
+    assert adaptation._watch(run, on, first=3) is None

@@ -140,7 +140,7 @@ class AdaptationTask(LineTask):
                               damaged_cost="all", damage_input=False, old_data_noise=4.0,
                               damaged_policy_restarts=1, changed_output_noise=None,
                               changed_output_threshold=10.0, stop_stuck_joints=False,
-                              stuck_joint_ratio=0.1)
+                              stuck_joint_ratio=0.1, replan_stuck_joints=False)
     model_data = staticmethod(adaptation_model.damaged_arm_data)
 
     def _fields(self, exp):  # as AdaptationTask.hooks and .prepare

@@ -164,7 +164,13 @@ def test_the_reacher_arms_widen_their_first_learned_start_by_default():
         if key != "output":
             assert damaged_values[key] == value, key
     assert damaged.damage_mode == "stuck"
-    for other in (ADAPTATION.parse([]), REACHER.parse(["--preset", "paper-code"]),
+    # so does the adaptation's healthy arm, with the reacher's budget of learned episodes
+    adapted = settings_to_dict(ADAPTATION.parse([]))
+    for key, value in settings_to_dict(healthy).items():
+        if key not in ("output", "episodes"):
+            assert adapted[key] == value, key
+    assert adapted["healthy_episodes"] == healthy.episodes - healthy.random_episodes == 3
+    for other in (REACHER.parse(["--preset", "paper-code"]),
                   DAMAGED_REACHER.parse(["--preset", "paper-code"])):
         assert (other.early_start_var, other.policy_init_var) == (0.0, 0.0)
     agent = tiny_agent([])
@@ -190,7 +196,7 @@ def test_a_saved_run_resumes_with_its_settings_and_todays_defaults_for_missing_o
     assert (resumed.early_start_var, resumed.limit_cost, resumed.fine_cost_width,
             resumed.policy_init_var) == (0.1, 0.1, 0.05, 0.1)
     assert (resumed.cost_width, resumed.seed) == (0.3, 4)
-    assert ADAPTATION.parse(["--resume", str(run)]).early_start_var == 0.0
+    assert ADAPTATION.parse(["--resume", str(run)]).early_start_var == 0.1
     # a saved value wins, and so does a flag given again
     (run / "progress.json").write_text(json.dumps({"settings": dict(new,
                                                                     early_start_var=0.05)}))
@@ -199,17 +205,20 @@ def test_a_saved_run_resumes_with_its_settings_and_todays_defaults_for_missing_o
                               ).early_start_var == 0.2
 
 
-def test_the_adaptation_has_the_fine_cost_and_no_limit_bumps(tmp_path):
+def test_the_adaptation_has_the_reachers_costs(tmp_path):
     import json
 
     args = ADAPTATION.parse(["--output", str(tmp_path / "new")])
-    assert args.fine_cost_width == 0.05 and args.limit_cost == 0.0
+    assert args.fine_cost_width == 0.05 and args.limit_cost == 0.1
     agent = reacher_agent.agent_builder(args, np.array([1.2, 0.38, 0.38]), LIMITS)(
         (np.zeros((3, 17)), np.zeros((3, 10))), np.zeros((1, 10)))
-    terms = agent.reward.base_rewards
-    assert [type(t).__name__ for t in terms] == ["ExponentialReward"] * 2
-    np.testing.assert_allclose(terms[1].W.numpy(), reacher_agent.position_weights(10, 0.05))
-    assert ADAPTATION.parse(["--limit-cost", "0.1"]).limit_cost == 0.1
+    healthy = reacher_agent.agent_builder(REACHER.parse([]), np.array([1.2, 0.38, 0.38]),
+                                          LIMITS)((np.zeros((3, 17)), np.zeros((3, 10))),
+                                                  np.zeros((1, 10)))
+    assert agent.expected_return() == healthy.expected_return()
+    np.testing.assert_allclose(agent.reward.base_rewards[0].base_rewards[1].W.numpy(),
+                               reacher_agent.position_weights(10, 0.05))  # the fine cost
+    assert ADAPTATION.parse(["--limit-cost", "0"]).limit_cost == 0.0
     # a run saved while the adaptation had no fine cost (null) resumes without it
     run = tmp_path / "old"
     run.mkdir()
@@ -239,11 +248,11 @@ class _HealthyRun:
 @pytest.mark.parametrize("flags, reaching, done, learned", [
     ([], {1}, 0, 1),  # stop at the first episode that reached
     ([], {3}, 0, 3),
-    ([], set(), 0, 4),  # never reached: every healthy episode
+    ([], set(), 0, 3),  # never reached: every healthy episode (the reacher's budget)
     (["--min-healthy-episodes", "3"], {1}, 0, 3),  # reached early, more data anyway
-    (["--min-healthy-episodes", "3"], {4}, 0, 4),
+    (["--min-healthy-episodes", "3", "--healthy-episodes", "4"], {4}, 0, 4),
     (["--min-healthy-episodes", "3"], {1}, 2, 3),  # resumed after two: one more
-    (["--min-healthy-episodes", "6"], {1}, 0, 4),  # capped by --healthy-episodes
+    (["--min-healthy-episodes", "6"], {1}, 0, 3),  # capped by --healthy-episodes
     (["--healthy-episodes", "0"], set(), 0, 0),
 ])
 def test_the_adaptation_damages_the_arm_after_its_healthy_episodes(flags, reaching, done,

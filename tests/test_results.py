@@ -330,3 +330,32 @@ def test_figures_are_drawn_from_an_export(sweep, tmp_path):
     assert [os.path.basename(p) for p in drawn] == ["reacher_success_rate.png",
                                                     "reacher_distance_bands.png"]
     assert all(Path(p).read_bytes().startswith(b"\x89PNG") for p in drawn)
+
+
+def test_the_adaptation_row_counts_recoveries_against_learning_from_scratch():
+    """An adaptation export's row: the median damaged episodes to reach again, and beside
+    it the same seeds' first solved episode in the from-scratch export ('scratch')."""
+    runs = []
+    for seed, recover in enumerate([1, 1, 2, None]):
+        summary = _summary(seed, success=recover is not None and recover <= 3,
+                           solved_at=3, total=100.0)
+        summary.update(healthy_reached_at_episode=2 + seed % 2, damage_at_episode=4,
+                       episodes_to_recover=recover)
+        runs.append(build.trim_run(summary, "default"))
+    adapted = {"format": build.FORMAT, "task": "adaptation", "command": ["x"],
+               "seeds": [0, 1, 2, 3], "failed": {}, "runs": runs}
+    adapted["settings"] = build.aggregates(adapted)
+    scratch = _export(3, 2)  # seeds 0-2 solved at episode 3, 3-4 never
+    row = dict(ROW, task="adaptation", scratch="reacher")
+    cells = build.table_row(row, {"adaptation": adapted, "reacher": scratch})
+    assert cells[3] == "**3/4**, recovered after 1 damaged episode(s) median"
+    assert cells[4] == ("more text; on the damaged arm: 1.5 episode(s) median to reach "
+                        "again, against 3 learning from scratch (`reacher`, the same 4 "
+                        "seeds)")
+    pairs = build.paired_recovery(adapted, scratch)
+    assert [(p["seed"], p["healthy_reached_at_episode"], p["episodes_to_recover"],
+             p["scratch_solved_at_episode"]) for p in pairs] == [
+        (0, 2, 1, 3), (1, 3, 1, 3), (2, 2, 2, 3), (3, 3, None, None)]
+    assert "| 3 | 3 | never | never |" in build.pairs_table(adapted, scratch)
+    with pytest.raises(FileNotFoundError, match="damaged_reacher"):
+        build.table_row(dict(row, scratch="damaged_reacher"), {"adaptation": adapted})

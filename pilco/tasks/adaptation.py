@@ -8,7 +8,11 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
    told unless ``--damage-input``; by default the elbow is stuck at its angle,
    ``--damage-mode straight`` straightens it); the damaged arm's start state becomes the
    agent's ``m_init``;
-3. up to ``--damaged-episodes`` learned episodes with the same agent, policy and data
+3. up to ``--damaged-episodes`` learned episodes with the same agent, policy and data;
+   the first one watches the joints (``--replan-stuck-joints``, the default): once a joint
+   that followed its commands on the healthy arm stops following them, the episode pauses,
+   the joint is no longer commanded and the policy is searched again from the state
+   reached (:class:`~pilco.tasks.adaptation_model.ReplanWhenStuck`)
    (``--drop-old-data``: the model then learns from the damaged episodes only;
    ``--old-data-noise F``, default 100: the healthy arm's transitions keep shaping the
    model, with F times the noise variance of the damaged arm's, so that they give way
@@ -26,7 +30,8 @@ mid-run and keep learning with the same agent (the paper's motivation, §5.2).
    search also runs from N - 1 random policies and keeps the best predicted return),
    stopping once it reaches again (unless ``--no-stop-when-recovered``).
 
-The summary adds ``damage_at_episode`` (first episode on the damaged arm) and
+The summary adds ``healthy_reached_at_episode`` (the first healthy episode that reached,
+null if none did), ``damage_at_episode`` (first episode on the damaged arm) and
 ``episodes_to_recover`` (damaged episodes until one reaches, counting that one; null if
 none did). "Success": recovered within :data:`RECOVER_WITHIN` damaged episodes.
 """
@@ -154,6 +159,10 @@ def replay_damage(exp: Experiment, s: AdaptationSettings):
         inert = exp.task_state.get("inert_actions")
         if first is not None and episode > first and inert:
             _stop_commanding(view.agent, inert)  # --stop-stuck-joints
+        if first is not None and episode == first + 1 and "replanned" in exp.records[first - 1]:
+            logger.warning("episode %d re-planned mid-episode, which a replay does not redo: "
+                           "the replayed policy search of episode %d starts from the policy "
+                           "before the re-plan", first, episode)
         if first is None or episode != first:
             return
         agent = view.agent
@@ -240,6 +249,7 @@ def run(exp: Experiment, s: AdaptationSettings) -> Dict[str, Any]:
             exp.run_random_episode()
         if fields["damage_at_episode"] is None:
             run_healthy(exp, s)
+            fields["healthy_reached_at_episode"] = exp.solved_at_episode()
             damage(exp, s)
             fields["damage_at_episode"] = len(exp.episodes) + 1
             if s.drop_old_data:
@@ -307,8 +317,8 @@ class AdaptationTask(reacher.ReacherTask):
     def prepare(self, exp: Experiment, s: AdaptationSettings) -> None:
         """The adaptation's summary fields, and the damage redone by a replay."""
         super().prepare(exp, s)
-        exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None,
-                              **exp.summary_fields}
+        exp.summary_fields = {"healthy_reached_at_episode": None, "damage_at_episode": None,
+                              "episodes_to_recover": None, **exp.summary_fields}
         track_damage_data(exp)
         exp.before_replayed_episode = replay_damage(exp, s)
 
