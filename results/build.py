@@ -529,18 +529,29 @@ def paired_recovery(data: Mapping[str, Any], scratch: Mapping[str, Any],
                     setting: str = "default") -> List[Dict[str, Any]]:
     """Per seed of the adaptation export ``data`` (its ``setting``) that the from-scratch
     export ``scratch`` (its default setting) also ran: ``seed``,
-    ``healthy_reached_at_episode`` ("–" for a run exported without it),
+    ``healthy_reached_at_episode`` (:func:`_healthy_reached`),
     ``episodes_to_recover`` (damaged episodes, counting the
     one that reached; None: not within the run) and ``scratch_solved_at_episode`` (the
     from-scratch run's first solved episode, counting its random ones: the episodes it
     spent on the damaged arm; None: never)."""
     theirs = {r["seed"]: r for r in scratch["runs"] if r["setting"] == "default"}
-    return [{"seed": r["seed"],
-             "healthy_reached_at_episode": r.get("healthy_reached_at_episode", "–"),
+    return [{"seed": r["seed"], "healthy_reached_at_episode": _healthy_reached(r),
              "episodes_to_recover": r.get("episodes_to_recover"),
              "scratch_solved_at_episode": theirs[r["seed"]]["solved_at_episode"]}
             for r in sorted(data["runs"], key=lambda r: r["seed"])
             if r["setting"] == setting and r["seed"] in theirs]
+
+
+def _healthy_reached(run: Mapping[str, Any]) -> Any:
+    """An adaptation run's first healthy episode that reached: its summary's field, else
+    its first solved episode when that came before the damage (None: none did; "–" for
+    a run exported without either field)."""
+    if "healthy_reached_at_episode" in run:
+        return run["healthy_reached_at_episode"]
+    first, damage = run.get("solved_at_episode"), run.get("damage_at_episode")
+    if damage is None:
+        return "–"
+    return first if first is not None and first < damage else None
 
 
 def _median(values: Sequence[float]) -> Optional[float]:

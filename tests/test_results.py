@@ -348,7 +348,7 @@ def test_the_adaptation_row_counts_recoveries_against_learning_from_scratch():
     scratch = _export(3, 2)  # seeds 0-2 solved at episode 3, 3-4 never
     row = dict(ROW, task="adaptation", scratch="reacher")
     cells = build.table_row(row, {"adaptation": adapted, "reacher": scratch})
-    assert cells[3] == "**3/4**, recovered after 1 damaged episode(s) median"
+    assert cells[3] == "**3/4**, recovered after 1.5 damaged episode(s) median"
     assert cells[4] == ("more text; on the damaged arm: 1.5 episode(s) median to reach "
                         "again, against 3 learning from scratch (`reacher`, the same 4 "
                         "seeds)")
