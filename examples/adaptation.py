@@ -1,16 +1,17 @@
 """Adaptation to damage: learn to reach on the healthy Fetch arm, then break its elbow
 mid-run and keep learning with the same agent (the paper's motivation, §5.2).
 
-A random episode and up to 4 learned healthy episodes (until one reaches), then the
-damage (the elbow stuck at its angle; ``--damage-mode straight`` straightens it), then up to
-4 learned damaged episodes (until the arm reaches again). The first damaged episode
-shows which joint stopped following its commands; from the next one on the agent stops
-commanding it and its model sees that joint's commands as 0, so the healthy episodes
-describe the damaged arm as well and count as equals (``--no-stop-stuck-joints``: they
-keep 100 times the damaged ones' noise variance instead, ``--old-data-noise``;
-``--drop-old-data`` forgets them). Every reacher setting is a flag too (``--help``); the
-task is :mod:`pilco.tasks.adaptation`. Figure ``adaptation_distance.png``: the distance
-per step, healthy and damaged episodes.
+The healthy arm learns as ``examples/reacher.py`` does (a random episode, then up to 3
+learned episodes, stopping at the first that reaches), then the damage (the elbow stuck
+at its angle; ``--damage-mode straight`` straightens it; the agent is not told), then up
+to 4 learned damaged episodes (until the arm reaches again). In the first damaged episode
+the agent watches its joints: after 3 steps the elbow has not followed its commands, so
+the episode pauses, the agent stops commanding it, its model sees that joint's commands
+as 0 (the healthy episodes then describe the damaged arm as well), and the policy is
+searched again from where the arm is; the episode goes on with it
+(``--no-replan-stuck-joints``: only after the episode). Every reacher setting is a flag
+too (``--help``); the task is :mod:`pilco.tasks.adaptation`. Figure
+``adaptation_distance.png``: the distance per step, healthy and damaged episodes.
 
 Usage::
 
