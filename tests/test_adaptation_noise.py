@@ -401,9 +401,13 @@ def test_the_first_damaged_episode_replans_once_a_joint_is_stuck(tmp_path, monke
     assert note["step"] == 3 and note["stuck_joints"] == [0]
     assert exp.summary_fields["stuck_joints"] == [0]
     assert exp.task_state["inert_actions"] == [0] and exp.task_state["inert_from_episode"] == 3
-    # the episode's record keeps the note; the model sees the stuck commands as 0
-    exp._add_episode(ep, {"interaction": ep.seconds}, {})
+    # the pause is the loop's policy time; the episode's record keeps the note and counts
+    # the search's evaluations; the model sees the stuck commands as 0
+    paused = exp.policy_notes.pop("paused_seconds")
+    assert paused == pytest.approx(note["seconds"], abs=0.01) and paused < ep.seconds
+    exp._add_episode(ep, {"interaction": ep.seconds - paused}, {}, policy_evaluations=0)
     assert exp.records[-1]["replanned"]["stuck_joints"] == [0]
+    assert exp.records[-1]["policy_evaluations"] == agent.policy_evaluations > 0
     np.testing.assert_array_equal(agent.data[0][50:, 2], 0.0)
     # after the episode, stop_stuck_joints keeps the joints found mid-episode
     adaptation_model.stop_stuck_joints(exp, stuck_args(), first=3)

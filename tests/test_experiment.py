@@ -503,3 +503,33 @@ def test_a_fragile_policy_is_searched_again_on_the_start_mixture(tmp_path, gap, 
     assert agent.start_spread is None  # the plain objective is left in place
     with pytest.raises(ValueError, match="policy_start_mixture_when"):
         config(policy_start_mixture_when="sometimes")
+
+
+def test_a_watch_sees_the_states_and_its_pause_counts_as_policy_time(tmp_path):
+    """``run_learned_episode(watch=...)``: the watch wraps the agent's policy for that
+    episode only, sees every state as it comes, and the seconds it notes as a pause move
+    from interaction to policy time."""
+    import time
+
+    seen = []
+
+    def watch(policy):
+        def watched(x):
+            seen.append(np.array(x))
+            if len(seen) == 2:
+                time.sleep(0.2)  # a pause, e.g. to re-plan
+                exp.policy_notes["paused_seconds"] = 0.2
+            return policy(x)
+
+        return watched
+
+    exp, agents = experiment(tmp_path)
+    exp.run_random_episode()
+    exp.run_learned_episode(watch=watch)
+    episode = exp.episodes[-1]
+    np.testing.assert_array_equal(np.array(seen), episode.states[:-1])
+    assert exp.records[-1]["seconds"]["interaction"] == pytest.approx(episode.seconds - 0.2)
+    assert exp.records[-1]["seconds"]["interaction"] < 0.2 <= exp.records[-1]["seconds"]["policy"]
+    assert "paused_seconds" not in exp.records[-1]
+    exp.run_learned_episode()  # no watch: the agent's own policy
+    assert len(seen) == episode.steps

@@ -175,7 +175,10 @@ class Experiment(RunRecord):
 
         ``watch``: ``policy_fn -> policy_fn``, wraps the agent's policy ``x [D] -> u [U]``
         for this episode's interaction (a task that watches the states as they come, and
-        may change the agent mid-episode, e.g. re-plan); its time counts as interaction."""
+        may change the agent mid-episode, e.g. re-plan). Seconds it notes in
+        ``policy_notes["paused_seconds"]`` (a pause to re-plan) count as policy time, not
+        interaction; ``policy_notes["extra_evaluations"]`` as the episode's policy
+        evaluations."""
         if self.agent is None:
             raise RuntimeError("no agent yet: run the random episodes first")
         number = len(self.episodes) + 1
@@ -196,7 +199,9 @@ class Experiment(RunRecord):
             return agent.compute_action(x)[0]
 
         ep = self._interact(number, policy if watch is None else watch(policy))
-        seconds["interaction"] = ep.seconds
+        paused = float(self.policy_notes.pop("paused_seconds", 0.0))
+        seconds["interaction"] = ep.seconds - paused
+        seconds["policy"] += paused
         prediction.update(predictions_after(self, ep))
         return self._add_episode(ep, seconds, prediction, evaluations)
 

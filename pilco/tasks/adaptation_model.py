@@ -200,7 +200,8 @@ class ReplanWhenStuck:
     covariance, the episode's policy budget and early stop), and the episode continues
     with the new policy. Replans at most once; the agent's start state is restored after
     the search. The episode's record gets a ``replanned`` note (step, joints, predicted
-    return, seconds). A replay of the run's learning (``python -m pilco.diagnose``) does
+    return, seconds); the pause counts as the episode's policy time, its search's
+    evaluations as the episode's. A replay of the run's learning (``python -m pilco.diagnose``) does
     not redo the pause: its next policy search starts from the policy before it.
 
     Use as ``exp.run_learned_episode(watch=ReplanWhenStuck(exp, s, first, number))``."""
@@ -258,9 +259,13 @@ class ReplanWhenStuck:
         finally:
             agent.m_init = start
         seconds = time.perf_counter() - t0
-        exp.policy_notes["replanned"] = {"step": step, "stuck_joints": joints,
-                                         "predicted_return": float(expected),
-                                         "seconds": round(seconds, 2)}
+        notes = exp.policy_notes
+        notes["replanned"] = {"step": step, "stuck_joints": joints,
+                              "predicted_return": float(expected), "seconds": round(seconds, 2)}
+        # the pause is policy time, and its search's evaluations the episode's (the loop)
+        notes["paused_seconds"] = notes.get("paused_seconds", 0.0) + seconds
+        notes["extra_evaluations"] = (notes.get("extra_evaluations", 0)
+                                      + int(getattr(agent, "policy_evaluations", 0) or 0))
         logger.info("episode %d: joint(s) %s stuck after %d steps; re-planned from the state "
                     "reached without them in %.1f s (predicted return %.3f)", self.number,
                     joints, step, seconds, expected)
