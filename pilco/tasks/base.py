@@ -13,6 +13,7 @@ nothing below reads the command line. :meth:`Task.main` is the whole command::
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 from typing import Any, Callable, ClassVar, Dict, List, Mapping, Optional, Sequence, Type
@@ -49,11 +50,24 @@ class Task:
     # -- settings -------------------------------------------------------------------------
     def parser(self):
         """The task's :class:`argparse.ArgumentParser` (its flags and defaults)."""
-        return build_parser(self.settings, self.description, self.presets, self.prog)
+        return build_parser(self.settings, self.description, self.presets, self.prog,
+                            self.examples)
 
     @property
     def prog(self) -> str:
-        return f"python -m pilco.tasks {self.name}"
+        """The task's command in usage lines and errors (``python -m pilco.tasks TASK``
+        and ``examples/TASK.py`` run the same)."""
+        return f"pilco run {self.name}"
+
+    @property
+    def examples(self) -> List[str]:
+        """The flags of the examples in ``--help`` (each runs: tests/test_command.py): a
+        seed, continuing that run for more episodes, each preset."""
+        defaults = {f.name: f.default for f in dataclasses.fields(self.settings)}
+        resume = f"--resume {defaults['output'].format(seed=3)}"
+        if defaults["episodes"] is not None:
+            resume += f" --episodes {defaults['episodes'] + 2}"
+        return ["--seed 3", resume, *[f"--seed 3 --preset {name}" for name in self.presets]]
 
     def parse(self, argv: Optional[Sequence[str]] = None) -> RunSettings:
         """The settings of command line ``argv`` (``--resume`` restores the saved ones,
@@ -62,7 +76,8 @@ class Task:
         from ..runtime import configure_logging, configure_threads, use_xla_cache
 
         settings = parse_settings(self.settings, argv, description=self.description,
-                                  presets=self.presets, prog=self.prog)
+                                  presets=self.presets, prog=self.prog,
+                                  examples=self.examples)
         try:
             settings = self.check(settings)
         except ValueError as err:
