@@ -251,3 +251,16 @@ def test_diagnose_a_missing_or_wrong_run_directory_in_one_line(make, tmp_path):
     assert len(lines) == 1, done.stderr
     assert lines[0].startswith(f"pilco diagnose: error: {run_dir}")
     assert done.stdout == ""
+
+
+@pytest.mark.parametrize("progress, message", [
+    ("{broken", "progress.json is not a run's (JSONDecodeError"),
+    ("{}", "cannot reopen the run (KeyError: 'records')"),
+])
+def test_run_resuming_a_wrong_run_directory_says_so_without_a_traceback(progress, message,
+                                                                        tmp_path):
+    (tmp_path / "progress.json").write_text(progress)
+    done = pilco("run", "cartpole", "--resume", str(tmp_path), "--quiet", "--no-render")
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr
+    assert f"pilco run cartpole: error: --resume {tmp_path}: {message}" in done.stderr

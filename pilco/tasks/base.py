@@ -16,15 +16,21 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import sys
 from typing import Any, Callable, ClassVar, Dict, List, Mapping, Optional, Sequence, Type
 
 from ..experiment import Experiment, ExperimentConfig
 from ..experiment.report import format_episode_table, format_timing_table
 from .settings import RunSettings, build_parser, parse_settings, settings_to_dict
 
-__all__ = ["Task"]
+__all__ = ["Task", "RunDirectoryError"]
 
 logger = logging.getLogger(__name__)
+
+
+class RunDirectoryError(ValueError):
+    """A run directory to resume or reopen whose files are missing, damaged or not a
+    run's."""
 
 
 class Task:
@@ -156,7 +162,12 @@ class Task:
                       settings=settings_to_dict(settings), **self.hooks(settings, env))
         build = self.agent_builder(settings, env)
         if settings.resume:
-            exp = Experiment.resume(settings.output, config, build, **kwargs)
+            try:
+                exp = Experiment.resume(settings.output, config, build, **kwargs)
+            except (OSError, ValueError, KeyError) as err:  # missing, damaged, foreign files
+                env.close()
+                raise RunDirectoryError(f"--resume {settings.output}: cannot reopen the run "
+                                        f"({type(err).__name__}: {err})") from err
         else:
             exp = Experiment(config, settings.output, build, **kwargs)
         self.prepare(exp, settings)
@@ -216,8 +227,13 @@ class Task:
             exp.close()
 
     def main(self, argv: Optional[Sequence[str]] = None) -> int:
-        """The task as a command; returns the exit status."""
+        """The task as a command; returns the exit status (2 after a usage error, such as
+        a ``--resume`` directory that holds no run, said in one line)."""
         settings = self.parse(argv)
-        exp = self.experiment(settings)
+        try:
+            exp = self.experiment(settings)
+        except RunDirectoryError as err:
+            sys.stderr.write(f"{self.prog}: error: {err}\n")
+            return 2
         summary = self.run(exp, settings)
         return self.finish(exp, summary, settings)

@@ -332,6 +332,9 @@ def parse_settings(cls: Type[S], argv: Optional[Sequence[str]] = None, *,
             saved = saved_settings(given["resume"])
         except FileNotFoundError:
             parser.error(f"--resume {given['resume']}: no progress.json there")
+        except (OSError, ValueError, AttributeError) as err:  # unreadable, not JSON, no dict
+            parser.error(f"--resume {given['resume']}: progress.json is not a run's "
+                         f"({type(err).__name__}: {err})")
     values: Dict[str, Any] = {}
     preset = given.get("preset") or saved.get("preset")
     if preset:
