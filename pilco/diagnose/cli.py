@@ -119,13 +119,15 @@ def main(argv: Optional[Sequence[str]] = None, prog: str = PROG) -> int:
     from .report import format_report
 
     from ..tasks import TASKS, get_task
+    from ..tasks.base import RunDirectoryError
 
     try:
         exp = open_run(args.run_dir)
     except (OSError, ValueError, KeyError) as err:
         # a damaged or foreign directory: its files are missing, unreadable or not a run's
+        cause = err.__cause__ if isinstance(err, RunDirectoryError) and err.__cause__ else err
         return _fail(parser.prog, f"{args.run_dir}: cannot reopen the run "
-                                  f"({type(err).__name__}: {err})")
+                                  f"({type(cause).__name__}: {cause})")
     learned = [i for i, record in enumerate(exp.records, start=1) if not record["random"]]
     if args.episode is not None and args.episode not in learned or not learned:
         exp.close()
