@@ -10,7 +10,9 @@ command                             the same as
 ``pilco tasks``                     the task names, one a line
 ==================================  ================================================
 
-``pilco COMMAND --help`` shows a command's flags (``pilco run TASK --help`` the task's).
+``pilco COMMAND --help`` shows a command's flags (``pilco run TASK --help`` the task's),
+``pilco --version`` the installed package's version. Every usage line and help says
+``pilco ...``, also when a command runs as ``python -m pilco.tasks`` and the like.
 Each command's modules are imported only when it runs, and TensorFlow's start-up is
 quieted (:func:`pilco.runtime.quiet_tensorflow`) before any of them is.
 """
@@ -21,9 +23,22 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from .runtime import quiet_tensorflow
 
-__all__ = ["COMMANDS", "main"]
+__all__ = ["COMMANDS", "EXAMPLES", "main", "version"]
 
 PROG = "pilco"
+
+
+def version() -> str:
+    """The package's version: its installed metadata's, else (pilco run from a checkout
+    that is not installed) :data:`pilco.__version__`."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("pilco")
+    except metadata.PackageNotFoundError:
+        from . import __version__
+
+        return __version__
 
 
 def _task_names() -> List[str]:
@@ -98,6 +113,11 @@ COMMANDS: Dict[str, Tuple[Callable[[List[str]], int], str, str]] = {
 }
 
 
+#: the examples of ``pilco --help`` (each runs: tests/test_command.py)
+EXAMPLES = ("tasks", "run cartpole --seed 3", "sweep cartpole --seeds 0-19",
+            "diagnose runs/cartpole-seed3 --episode 4")
+
+
 def usage() -> str:
     """The ``pilco --help`` text."""
     width = max(len(f"{name} {args}".strip()) for name, (_, args, _) in COMMANDS.items())
@@ -105,16 +125,22 @@ def usage() -> str:
              "PILCO: probabilistic inference for learning control.", "", "commands:"]
     lines += [f"  {f'{name} {args}'.strip():<{width}}  {text}"
               for name, (_, args, text) in COMMANDS.items()]
-    lines += ["", f"`{PROG} COMMAND --help` shows a command's flags."]
+    lines += ["", "options:", "  -h, --help     show this help message and exit",
+              "  -V, --version  show the package's version and exit", "",
+              f"`{PROG} COMMAND --help` shows a command's flags.", "", "examples:"]
+    lines += [f"  {PROG} {example}" for example in EXAMPLES]
     return "\n".join(lines) + "\n"
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``pilco COMMAND ...`` (``argv`` without the program name, default
     ``sys.argv[1:]``); returns the command's exit status, 2 for a missing or unknown
-    command."""
+    command; ``--version`` prints the package's version."""
     quiet_tensorflow()
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in ("-V", "--version"):
+        print(f"{PROG} {version()}")
+        return 0
     status = _pick(argv, list(COMMANDS), usage(), PROG, "command")
     if status is not None:
         return status

@@ -133,6 +133,21 @@ def test_an_earlier_episode_is_replayed_with_the_runs_settings(run_dir):
         agent_of_episode(exp, 1)
 
 
+@pytest.mark.parametrize("episode, message", [
+    ("1", "episode 1 is not a learned episode (learned episodes: 2, 3)"),
+    ("7", "episode 7 is not a learned episode (learned episodes: 2, 3)"),
+])
+def test_the_command_line_refuses_an_episode_the_run_did_not_learn(run_dir, episode,
+                                                                   message, capsys):
+    """A usage error in one line (status 2), before any diagnosis."""
+    from pilco.diagnose import main
+
+    assert main([run_dir, "--episode", episode, "--log-level", "WARNING"]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == f"pilco diagnose: error: {run_dir}: {message}\n"
+    assert captured.out == ""
+
+
 def test_the_command_line_prints_the_report_and_writes_the_json(run_dir, tmp_path, capsys):
     from pilco.diagnose import main
 

@@ -41,11 +41,11 @@ def test_rows_without_committed_data_are_exactly_the_manual_ones():
     for row, line in zip(rows, table_lines[1:]):
         assert line.startswith(f"| {row['label']} |")
         if "manual" in row:
-            assert row["task"] not in exports
+            assert build.data_name(row) not in exports
             assert line.count(build.MANUAL_MARK) == 2       # the result and the per-run cell
             assert f"{build.MANUAL_MARK} {row['label']}: typed into" in text[start:end]
         else:
-            assert row["task"] in exports, f"no results/{row['task']}.json"
+            assert build.data_name(row) in exports, f"no results/{build.data_name(row)}.json"
             assert build.MANUAL_MARK not in line
 
 

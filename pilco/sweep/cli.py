@@ -33,12 +33,19 @@ from .preflight import SweepError, check_ray_address, lock_output, split_address
 from .report import write_report
 from .runs import RunSpec
 
-__all__ = ["PROG", "build_parser", "plan", "main"]
+__all__ = ["PROG", "EXAMPLES", "build_parser", "plan", "main"]
 
 logger = logging.getLogger("pilco.sweep")
 
-#: the command's name in its usage and error messages (``pilco sweep`` passes its own)
-PROG = "python -m pilco.sweep"
+#: the command's name in its usage and error messages (``python -m pilco.sweep`` is the same)
+PROG = "pilco sweep"
+
+#: the examples of ``--help`` (each runs: tests/test_command.py)
+EXAMPLES = ("cartpole --seeds 0-19",
+            "reacher --seeds 0-9 --grid cost_width=0.2,0.3",
+            "pendulum --seeds 0-9",
+            "cartpole --seeds 0,3,5-7 --set policy_early_stop=solved -- --episodes 10",
+            "damaged_reacher --seeds 0-99 --address auto --cpus-per-run 2")
 
 
 def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
@@ -47,15 +54,10 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
         usage="%(prog)s TASK [--seeds SEEDS] [options] [-- TASK FLAGS...]",
         description="Run a PILCO task for many seeds (and settings) on Ray; report success\n"
                     "rates with 95 % Wilson intervals, episodes to solve, distances, times.\n"
-                    "Each run is `python -m pilco.tasks TASK --seed S --output\n"
-                    "DIR/SETTING/seed-S --quiet --no-render --no-figures [setting flags]\n"
-                    "[TASK FLAGS]`. The same command again skips the runs that finished.",
-        epilog="examples:\n"
-               "  %(prog)s cartpole --seeds 0-19\n"
-               "  %(prog)s reacher --seeds 0-9 --grid cost_width=0.2,0.3\n"
-               "  %(prog)s pendulum --seeds 0-9\n"
-               "  %(prog)s cartpole --seeds 0,3,5 --set no_early_stop=true -- --episodes 10\n"
-               "  %(prog)s cartpole --seeds 0-99 --address auto --cpus-per-run 2",
+                    "Each run is `pilco run TASK --seed S --output DIR/SETTING/seed-S\n"
+                    "--quiet --no-render --no-figures [setting flags] [TASK FLAGS]`.\n"
+                    "The same command again skips the runs that finished.",
+        epilog="examples:\n" + "\n".join(f"  %(prog)s {e}" for e in EXAMPLES),
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("task", metavar="TASK",
                         help=f"one of: {', '.join(pilco.tasks.TASKS)}")
@@ -66,8 +68,8 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
                              "DIR/SETTING/seed-S, the aggregate to DIR/sweep.json")
     parser.add_argument("--set", dest="fixed", metavar="KEY=VALUE", action="append",
                         default=[], help="a task flag for every run: horizon=30 is "
-                                         "--horizon 30, no_early_stop=true is "
-                                         "--no-early-stop (repeatable)")
+                                         "--horizon 30, retrain_unchanged_model=true "
+                                         "is --retrain-unchanged-model (repeatable)")
     parser.add_argument("--grid", metavar="KEY=V1,V2", action="append", default=[],
                         help="run every combination of these values, each for every seed "
                              "(repeatable)")
@@ -76,7 +78,7 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
                              "HOST:PORT (a head's address) or ray://HOST:10001; default: "
                              "start a local Ray of the sweep's own")
     parser.add_argument("--num-cpus", type=int, default=None,
-                        help="CPUs of the local Ray (default: all); not with --address")
+                        help="CPUs of the local Ray (default all); not with --address")
     parser.add_argument("--cpus-per-run", type=int, default=1,
                         help="CPUs (and TensorFlow/BLAS threads) per run (default 1)")
     parser.add_argument("--max-retries", type=int, default=1,

@@ -41,7 +41,7 @@ def parse_seeds(text: str) -> List[int]:
 
 def parse_assignment(text: str, grid: bool = False) -> Tuple[str, Any]:
     """``"KEY=VALUE"`` -> ``(key, value)``; with ``grid``, ``"KEY=V1,V2"`` -> ``(key,
-    [v1, v2])``. Keys use underscores or dashes (``no_early_stop`` is ``--no-early-stop``)."""
+    [v1, v2])``. Keys use underscores or dashes (``max_data`` is ``--max-data``)."""
     if "=" not in text:
         raise ValueError(f"{text!r} is not KEY=VALUE")
     key, value = text.split("=", 1)
@@ -81,7 +81,7 @@ def setting_flags(key: str, value: str, parser: Optional[argparse.ArgumentParser
                        if option in a.option_strings), None)
         if action is None:
             raise ValueError(f"the task has no flag {option} (from {key}={value}); see "
-                             f"python -m pilco.tasks TASK --help")
+                             f"{parser.prog} --help")
         if action.nargs != 0:
             return [option, value]
         if isinstance(action, argparse.BooleanOptionalAction) and value.lower() in _FALSE:

@@ -1,4 +1,5 @@
-"""``python -m pilco.tasks TASK [flags]``: run one of the paper's experiments."""
+"""``python -m pilco.tasks TASK [flags]``: run one of the paper's experiments, the same
+as ``pilco run TASK [flags]`` (:mod:`pilco.command`, whose usage lines it shows)."""
 from __future__ import annotations
 
 import sys
@@ -10,15 +11,10 @@ quiet_tensorflow()
 
 
 def main(argv=None) -> int:
-    from . import TASKS, run_task
+    from ..command import COMMANDS
 
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in TASKS:
-        print(f"usage: python -m pilco.tasks {{{','.join(TASKS)}}} [flags]\n"
-              f"       python -m pilco.tasks TASK --help   (the task's flags)",
-              file=sys.stderr if argv and argv[0] not in ("-h", "--help") else sys.stdout)
-        return 0 if argv and argv[0] in ("-h", "--help") else 2
-    return run_task(argv[0], argv[1:])
+    run, _, _ = COMMANDS["run"]
+    return run(list(sys.argv[1:] if argv is None else argv))
 
 
 if __name__ == "__main__":

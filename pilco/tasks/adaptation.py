@@ -95,8 +95,8 @@ class AdaptationSettings(reacher.ReacherSettings):
         None, "from the second damaged episode on, the state dimensions whose first damaged "
         "episode the healthy model explained badly (mean squared standardised one-step "
         "error above --changed-output-threshold) see the healthy arm's transitions with G "
-        "times the noise variance, the others with --old-data-noise (None: off, "
-        "--old-data-noise for all)", kind=positive_float, metavar="G", group="adaptation")
+        "times the noise variance, the others with --old-data-noise", kind=positive_float,
+        metavar="G", group="adaptation", unset="off: --old-data-noise for all")
     changed_output_threshold: float = setting(
         10.0, "mean squared standardised one-step error of the healthy model on the first "
         "damaged episode above which a state dimension counts as changed by the damage",

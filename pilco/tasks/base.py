@@ -13,17 +13,24 @@ nothing below reads the command line. :meth:`Task.main` is the whole command::
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
+import sys
 from typing import Any, Callable, ClassVar, Dict, List, Mapping, Optional, Sequence, Type
 
 from ..experiment import Experiment, ExperimentConfig
 from ..experiment.report import format_episode_table, format_timing_table
 from .settings import RunSettings, build_parser, parse_settings, settings_to_dict
 
-__all__ = ["Task"]
+__all__ = ["Task", "RunDirectoryError"]
 
 logger = logging.getLogger(__name__)
+
+
+class RunDirectoryError(ValueError):
+    """A run directory to resume or reopen whose files are missing, damaged or not a
+    run's."""
 
 
 class Task:
@@ -49,11 +56,24 @@ class Task:
     # -- settings -------------------------------------------------------------------------
     def parser(self):
         """The task's :class:`argparse.ArgumentParser` (its flags and defaults)."""
-        return build_parser(self.settings, self.description, self.presets, self.prog)
+        return build_parser(self.settings, self.description, self.presets, self.prog,
+                            self.examples)
 
     @property
     def prog(self) -> str:
-        return f"python -m pilco.tasks {self.name}"
+        """The task's command in usage lines and errors (``python -m pilco.tasks TASK``
+        and ``examples/TASK.py`` run the same)."""
+        return f"pilco run {self.name}"
+
+    @property
+    def examples(self) -> List[str]:
+        """The flags of the examples in ``--help`` (each runs: tests/test_command.py): a
+        seed, continuing that run for more episodes, each preset."""
+        defaults = {f.name: f.default for f in dataclasses.fields(self.settings)}
+        resume = f"--resume {defaults['output'].format(seed=3)}"
+        if defaults["episodes"] is not None:
+            resume += f" --episodes {defaults['episodes'] + 2}"
+        return ["--seed 3", resume, *[f"--seed 3 --preset {name}" for name in self.presets]]
 
     def parse(self, argv: Optional[Sequence[str]] = None) -> RunSettings:
         """The settings of command line ``argv`` (``--resume`` restores the saved ones,
@@ -62,7 +82,8 @@ class Task:
         from ..runtime import configure_logging, configure_threads, use_xla_cache
 
         settings = parse_settings(self.settings, argv, description=self.description,
-                                  presets=self.presets, prog=self.prog)
+                                  presets=self.presets, prog=self.prog,
+                                  examples=self.examples)
         try:
             settings = self.check(settings)
         except ValueError as err:
@@ -141,7 +162,12 @@ class Task:
                       settings=settings_to_dict(settings), **self.hooks(settings, env))
         build = self.agent_builder(settings, env)
         if settings.resume:
-            exp = Experiment.resume(settings.output, config, build, **kwargs)
+            try:
+                exp = Experiment.resume(settings.output, config, build, **kwargs)
+            except (OSError, ValueError, KeyError) as err:  # missing, damaged, foreign files
+                env.close()
+                raise RunDirectoryError(f"--resume {settings.output}: cannot reopen the run "
+                                        f"({type(err).__name__}: {err})") from err
         else:
             exp = Experiment(config, settings.output, build, **kwargs)
         self.prepare(exp, settings)
@@ -201,8 +227,13 @@ class Task:
             exp.close()
 
     def main(self, argv: Optional[Sequence[str]] = None) -> int:
-        """The task as a command; returns the exit status."""
+        """The task as a command; returns the exit status (2 after a usage error, such as
+        a ``--resume`` directory that holds no run, said in one line)."""
         settings = self.parse(argv)
-        exp = self.experiment(settings)
+        try:
+            exp = self.experiment(settings)
+        except RunDirectoryError as err:
+            sys.stderr.write(f"{self.prog}: error: {err}\n")
+            return 2
         summary = self.run(exp, settings)
         return self.finish(exp, summary, settings)

@@ -143,7 +143,7 @@ class ReacherSettings(RunSettings):
         "none", "priors on the dynamics GPs' hyperparameters: 'paper' the paper code's Gamma "
         "priors on lengthscales and signal variance (MAP)", choices=("none", "paper"))
     planning_horizon: Optional[int] = setting(
-        None, "steps the policy is optimised over (default: --horizon)", kind=positive_int)
+        None, "steps the policy is optimised over", kind=positive_int, unset="--horizon")
     start_var: float = setting(1e-4, "variance of the initial state distribution (times the "
                                "identity)", kind=positive_float)
     random_action: float = setting(0.05, "random episodes: actions uniform in ±this [rad]",
@@ -155,8 +155,8 @@ class ReacherSettings(RunSettings):
     no_early_stop: bool = setting(False, "run every episode for the full horizon even at the "
                                   "target")
     target: Optional[tuple] = setting(
-        None, "target position [m] (default the env's (1.2, 0.38, 0.38))", kind=float,
-        nargs=3, metavar=("X", "Y", "Z"))
+        None, "target position [m]", kind=float, nargs=3, metavar=("X", "Y", "Z"),
+        unset="the env's (1.2, 0.38, 0.38)")
     target_spread: float = setting(
         0.0, "draw the target uniformly within ±S m per axis of --target (or of the default "
         "target) from the run's seed; 0: no draw", kind=non_negative_float, metavar="S")

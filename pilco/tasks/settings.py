@@ -76,16 +76,17 @@ def optional_float(text: str) -> Optional[float]:
 def setting(default: Any, help: str, *, kind: Optional[Callable[[str], Any]] = None,  # noqa: A002
             choices: Optional[Sequence[Any]] = None, nargs: Any = None,
             metavar: Any = None, group: str = "task", negatable: bool = False,
-            flag: bool = True) -> Any:
+            flag: bool = True, unset: Optional[str] = None) -> Any:
     """A settings field: ``default`` and the flag's ``help``.
 
     ``kind`` reads a command-line value (default: the type of ``default``; a bool is a
     switch that sets True, or with ``negatable`` also has a ``--no-`` form); ``choices``,
     ``nargs`` and ``metavar`` as in :meth:`argparse.ArgumentParser.add_argument` (a value
     with ``nargs`` is kept as a tuple); ``group``: the help section; ``flag=False``: a
-    setting the task derives itself, with no flag."""
+    setting the task derives itself, with no flag; ``unset``: what a default of None
+    means, shown in ``--help`` as the default (without it a None default is not shown)."""
     meta = dict(help=help, kind=kind, choices=choices, nargs=nargs, metavar=metavar,
-                group=group, negatable=negatable, flag=flag)
+                group=group, negatable=negatable, flag=flag, unset=unset)
     return dataclasses.field(default=default, metadata={_META: meta})
 
 
@@ -146,15 +147,15 @@ class RunSettings:
     policy_patience: int = setting(10, "iterations for --policy-min-rel-improvement",
                                    kind=positive_int, group="learning")
     policy_iters_first: Optional[int] = setting(
-        None, "iterations of the first policy optimisation (None: --policy-iters)",
-        kind=positive_int, group="learning")
+        None, "iterations of the first policy optimisation", kind=positive_int,
+        group="learning", unset="as --policy-iters")
     model_iters: int = setting(1000, "L-BFGS iterations of GP training", kind=positive_int,
                                group="learning")
     model_restarts: int = setting(1, "GP training restarts", kind=positive_int,
                                   group="learning")
     max_data: Optional[int] = setting(
-        None, "GP learns from the first N transitions only (0 or None: all)",
-        kind=non_negative_int, group="learning")
+        None, "GP learns from the first N transitions only (0: all)",
+        kind=non_negative_int, group="learning", unset="all")
     policy_optimizer: str = setting(
         "L-BFGS-B", "policy optimiser (BFGS: dense update, as the MATLAB release)",
         kind=str.upper, choices=("L-BFGS-B", "BFGS"), group="learning")
@@ -167,8 +168,8 @@ class RunSettings:
         choices=("graph", "xla"), group="learning")
     policy_min_rel_improvement: Optional[float] = setting(
         None, "stop a policy optimisation once its predicted return grew by less than this "
-        "fraction of it over the last --policy-patience iterations (0 or None: never)",
-        kind=float, group="learning")
+        "fraction of it over the last --policy-patience iterations (0: never)",
+        kind=float, group="learning", unset="never")
     policy_early_stop: str = setting(
         "always", "apply --policy-min-rel-improvement always, or only once an episode was "
         "solved", choices=("always", "solved"), group="learning")
@@ -184,8 +185,8 @@ class RunSettings:
         None, "split the policy objective's start distribution into 2D+1 narrower Gaussians "
         "of the same mean and covariance, two of them this many standard deviations out "
         "along each principal axis, so that a policy failing from the flanks of the start "
-        "distribution is seen to fail (0 or None: off; costs 2D+1 times per evaluation)",
-        kind=non_negative_float, group="learning")
+        "distribution is seen to fail (0: off; costs 2D+1 times per evaluation)",
+        kind=non_negative_float, group="learning", unset="off")
     policy_start_mixture_when: str = setting(
         "solved", "use --policy-start-mixture in every policy search; only once an episode "
         "was solved (keeping a policy that works); or, once solved, only when the plain "
@@ -198,7 +199,7 @@ class RunSettings:
         group="learning")
     model_min_rel_improvement: Optional[float] = setting(
         None, "stop GP training once its loss fell by less than this fraction of it over "
-        "the last 10 iterations (0 or None: never)", kind=float, group="learning")
+        "the last 10 iterations (0: never)", kind=float, group="learning", unset="never")
     retrain_unchanged_model: bool = setting(
         False, "train the GPs again even if their training data did not change",
         group="learning")
@@ -214,14 +215,19 @@ def _flag_fields(cls: type) -> Iterable[dataclasses.Field]:
 
 def build_parser(cls: Type[RunSettings], description: str = "",
                  presets: Optional[Mapping[str, Mapping[str, Any]]] = None,
-                 prog: Optional[str] = None) -> argparse.ArgumentParser:
+                 prog: Optional[str] = None,
+                 examples: Sequence[str] = ()) -> argparse.ArgumentParser:
     """The flags of the settings class ``cls``, one per field, grouped as declared. A flag
     left out of the command line is absent from the parsed namespace (defaults are
     applied by :func:`parse_settings`, which knows presets and saved runs); ``--help``
-    shows each field's default."""
+    shows each field's default as ``(default X)`` (:func:`_default_text`) and, under
+    ``examples:``, each of ``examples`` (flags) after the command's name."""
     presets = dict(presets or {})
-    parser = argparse.ArgumentParser(prog=prog, description=description,
-                                     argument_default=argparse.SUPPRESS)
+    epilog = ("examples:\n" + "\n".join(f"  %(prog)s {e}" for e in examples)
+              if examples else None)
+    parser = argparse.ArgumentParser(prog=prog, description=description, epilog=epilog,
+                                     argument_default=argparse.SUPPRESS,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     groups: Dict[str, Any] = {}
     for field in _flag_fields(cls):
         meta = _meta(field)
@@ -229,7 +235,7 @@ def build_parser(cls: Type[RunSettings], description: str = "",
         if group is None:
             group = groups[meta["group"]] = parser.add_argument_group(meta["group"])
         name = "--" + field.name.replace("_", "-")
-        text = f"{meta['help']} (default {_shown(field.default)})"
+        text = meta["help"] + _default_text(field.default, meta)
         if field.name == "preset":
             if not presets:
                 continue
@@ -250,12 +256,30 @@ def build_parser(cls: Type[RunSettings], description: str = "",
     return parser
 
 
+def _default_text(default: Any, meta: Mapping[str, Any]) -> str:
+    """`` (default X)`` for a flag's help: a switch's state as on/off when it has a
+    ``--no-`` form and nothing for a plain switch (off unless given), a None default as
+    the field's ``unset`` text or nothing."""
+    if isinstance(default, bool) and meta.get("kind") is None:
+        return f" (default {'on' if default else 'off'})" if meta.get("negatable") else ""
+    if default is None:
+        return f" (default {meta['unset']})" if meta.get("unset") else ""
+    return f" (default {_shown(default)})"
+
+
 def _shown(value: Any) -> str:
     return " ".join(map(str, value)) if isinstance(value, tuple) else str(value)
 
 
 def _describe(values: Mapping[str, Any]) -> str:
-    return " ".join(f"--{k.replace('_', '-')} {_shown(v)}" for k, v in values.items())
+    """A preset's values as flags (a switch as ``--name`` when on, ``--no-name`` off)."""
+    def flag(key: str, value: Any) -> str:
+        name = key.replace("_", "-")
+        if isinstance(value, bool):
+            return f"--{name}" if value else f"--no-{name}"
+        return f"--{name} {_shown(value)}"
+
+    return " ".join(flag(k, v) for k, v in values.items())
 
 
 def settings_from_dict(cls: Type[S], values: Mapping[str, Any]) -> S:
@@ -290,7 +314,7 @@ def saved_settings(directory: str) -> Dict[str, Any]:
 def parse_settings(cls: Type[S], argv: Optional[Sequence[str]] = None, *,
                    description: str = "",
                    presets: Optional[Mapping[str, Mapping[str, Any]]] = None,
-                   prog: Optional[str] = None) -> S:
+                   prog: Optional[str] = None, examples: Sequence[str] = ()) -> S:
     """The settings of a command line (precedence in the module's docstring); ``output``
     is ``--resume``'s directory on resume, else ``--output`` with ``{seed}`` replaced.
     Bad values exit with argparse's usage error (status 2) naming the flag."""
@@ -300,7 +324,7 @@ def parse_settings(cls: Type[S], argv: Optional[Sequence[str]] = None, *,
         unknown = sorted(set(values) - names)
         if unknown:
             raise ValueError(f"preset {name!r} sets unknown settings {unknown}")
-    parser = build_parser(cls, description, presets, prog)
+    parser = build_parser(cls, description, presets, prog, examples)
     given = vars(parser.parse_args(argv))
     saved: Dict[str, Any] = {}
     if given.get("resume"):
@@ -308,6 +332,9 @@ def parse_settings(cls: Type[S], argv: Optional[Sequence[str]] = None, *,
             saved = saved_settings(given["resume"])
         except FileNotFoundError:
             parser.error(f"--resume {given['resume']}: no progress.json there")
+        except (OSError, ValueError, AttributeError) as err:  # unreadable, not JSON, no dict
+            parser.error(f"--resume {given['resume']}: progress.json is not a run's "
+                         f"({type(err).__name__}: {err})")
     values: Dict[str, Any] = {}
     preset = given.get("preset") or saved.get("preset")
     if preset:
