@@ -133,6 +133,12 @@ def test_predict_log_density_equals_gpr(trained, Xs):
     assert density.shape == (7,)
     ref = sum(g.predict_log_density((Xs, Ys[:, e:e + 1])).numpy() for e, g in enumerate(gprs))
     np.testing.assert_allclose(density.numpy(), ref, rtol=0, atol=TOL)
+    np.testing.assert_array_equal(model.predict_log_density([Xs.tolist(), Ys.tolist()]).numpy(),
+                                  density.numpy())
+    with pytest.raises(ValueError, match="same number of rows, got 7 and 6"):
+        model.predict_log_density((Xs, Ys[:6]))
+    with pytest.raises(ValueError, match="data Y must have 2 columns"):
+        model.predict_log_density((Xs, Ys[:, :1]))
     with pytest.raises(NotImplementedError, match="point-wise"):
         model.predict_log_density((Xs, Ys), full_cov=True)
 

@@ -66,11 +66,11 @@ from ..validation import (
     check_min_rel_improvement,
     check_noise_scales,
     check_pair,
+    check_points,
     check_positive_float,
     check_positive_int,
     check_ratio_bound,
     check_seed,
-    check_points,
     checked_arguments,
 )
 
@@ -99,11 +99,13 @@ def _check_Xnew(model: "MGPR", arguments) -> None:
 
 def _check_data_pair(model: "MGPR", arguments) -> None:
     X, Y = check_pair(arguments["data"], "data")
-    arguments["data"] = (check_points(X, model.num_dims, "data X"),
-                         check_points(Y, model.num_outputs, "data Y"))
-    if X.shape[0] is not None and Y.shape[0] is not None and X.shape[0] != Y.shape[0]:
+    X = check_points(X, model.num_dims, "data X")
+    Y = check_points(Y, model.num_outputs, "data Y")
+    rows_X, rows_Y = X.shape[0], Y.shape[0]  # None when traced with unknown sizes
+    if rows_X is not None and rows_Y is not None and rows_X != rows_Y:
         raise ValueError(f"data: X and Y must have the same number of rows, got "
-                         f"{X.shape[0]} and {Y.shape[0]}")
+                         f"{rows_X} and {rows_Y}")
+    arguments["data"] = (X, Y)
 
 
 def _check_input_gaussian(model: "MGPR", arguments) -> None:
