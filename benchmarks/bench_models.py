@@ -59,7 +59,7 @@ def measure(problem: str, mode: str, repeats: int = 20) -> dict:
     @tf.function(autograph=False)
     def loss_and_gradient():
         with tf.GradientTape() as tape:
-            loss = gp._training_loss()  # noqa: SLF001 - what optimize minimises
+            loss = gp.training_loss()  # what optimize minimises
         return loss, tape.gradient(loss, variables)
 
     t0 = time.perf_counter()

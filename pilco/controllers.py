@@ -17,6 +17,7 @@ from typing import Callable, Optional
 import gpflow
 import numpy as np
 import tensorflow as tf
+from check_shapes import check_shapes
 from gpflow import Parameter
 from gpflow.config import default_float
 
@@ -33,6 +34,7 @@ from .validation import (
     check_positive_int,
     check_squash,
     check_state_row,
+    checked_arguments,
 )
 
 __all__ = ["squash_sin", "squash_sat", "LinearController", "RbfController"]
@@ -100,6 +102,11 @@ def squash_sat(m, s, max_action=None):
     return M, S, C
 
 
+def _check_state_gaussian(controller, arguments) -> None:
+    arguments["m"], arguments["s"] = check_gaussian(arguments["m"], arguments["s"],
+                                                    controller.state_dim, "state")
+
+
 class _SquashedController(gpflow.base.Module):
     """What both policies share: dimensions, bounds, the squash, and the public protocol
     (:class:`pilco.protocols.Controller`) around an unsquashed prediction."""
@@ -119,6 +126,13 @@ class _SquashedController(gpflow.base.Module):
         """Moments of the unsquashed action: M [1, U], S [U, U], V [D, U]."""
         raise NotImplementedError
 
+    @check_shapes(
+        "m: [1, D]",
+        "s: [D, D]",
+        "return[0]: [1, U]",
+        "return[1]: [U, U]",
+        "return[2]: [D, U]",
+    )
     def moments(self, m, s, squash: bool = True, prepared=None):
         """Action moments. Shapes: m [1, D], s [D, D] -> M [1, U], S [U, U], V [D, U].
 
@@ -130,9 +144,17 @@ class _SquashedController(gpflow.base.Module):
             V = tf.matmul(V, C)
         return M, S, V
 
+    @checked_arguments(_check_state_gaussian)
+    @check_shapes(
+        "m: [1, D]",
+        "s: [D, D]",
+        "return[0]: [1, U]",
+        "return[1]: [U, U]",
+        "return[2]: [D, U]",
+    )
     def compute_action(self, m, s, squash: bool = True):
-        """Action moments with the input checked. Shapes as :meth:`moments`."""
-        m, s = check_gaussian(m, s, self.state_dim, "state")
+        """Action moments (tensors) with the input checked (:mod:`pilco.validation.inputs`:
+        eager or inside ``tf.function``). Shapes as :meth:`moments`."""
         return self.moments(m, s, squash)
 
 

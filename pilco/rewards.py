@@ -13,6 +13,7 @@ from typing import Sequence
 import gpflow
 import numpy as np
 import tensorflow as tf
+from check_shapes import check_shapes, inherit_check_shapes
 from gpflow.config import default_float
 
 from .angles import trig_moments
@@ -28,6 +29,7 @@ from .validation import (
     check_reward,
     check_reward_list,
     check_weight_matrix,
+    checked_arguments,
 )
 
 __all__ = ["ExponentialReward", "AxisBumpsReward", "LinearReward", "CombinedRewards",
@@ -54,17 +56,36 @@ def _exp_reward_moments(m, s, W, t):
     return mean, r2 - mean * mean
 
 
+def _check_state_gaussian(reward, arguments) -> None:
+    arguments["m"], arguments["s"] = check_gaussian(arguments["m"], arguments["s"],
+                                                    reward.state_dim, "state")
+
+
 class _Reward(gpflow.base.Module):
     """Base of the rewards of this module: :meth:`compute_reward` checks its input and
     calls :meth:`moments`, the method of :class:`pilco.protocols.Reward`."""
 
     state_dim: int
 
+    @checked_arguments(_check_state_gaussian)
+    @check_shapes(
+        "m: [1, D]",
+        "s: [D, D]",
+        "return[0]: [1, 1]",
+        "return[1]: [1, 1]",
+    )
     def compute_reward(self, m, s):
-        """Expected reward and its variance. Shapes: m [1, D], s [D, D] -> [1, 1], [1, 1]."""
-        m, s = check_gaussian(m, s, self.state_dim, "state")
+        """Expected reward and its variance (tensors), the input checked
+        (:mod:`pilco.validation.inputs`: eager or inside ``tf.function``).
+        Shapes: m [1, D], s [D, D] -> [1, 1], [1, 1]."""
         return self.moments(m, s)
 
+    @check_shapes(
+        "m: [1, D]",
+        "s: [D, D]",
+        "return[0]: [1, 1]",
+        "return[1]: [1, 1]",
+    )
     def moments(self, m, s):  # pragma: no cover - abstract
         """Reward moments without input checks. Shapes as :meth:`compute_reward`."""
         raise NotImplementedError
@@ -86,6 +107,7 @@ class ExponentialReward(_Reward):
         self.W = gpflow.Parameter(W, trainable=False)
         self.t = gpflow.Parameter(t, trainable=False)
 
+    @inherit_check_shapes
     def moments(self, m, s):
         return _exp_reward_moments(m, s, tf.convert_to_tensor(self.W), tf.convert_to_tensor(self.t))
 
@@ -122,6 +144,7 @@ class AxisBumpsReward(_Reward):
         self.widths = gpflow.Parameter(widths, trainable=False)
         self.coefs = gpflow.Parameter(coefs, trainable=False)
 
+    @inherit_check_shapes
     def moments(self, m, s):
         dims = tf.constant(self.dims)
         d = tf.gather(m[0], dims) - tf.convert_to_tensor(self.t)  # [K]
@@ -146,6 +169,7 @@ class LinearReward(_Reward):
         W = check_entries(W, D, "W").reshape(-1, 1)
         self.W = gpflow.Parameter(W, trainable=False)
 
+    @inherit_check_shapes
     def moments(self, m, s):
         W = tf.convert_to_tensor(self.W)
         return tf.matmul(m, W), tf.matmul(tf.transpose(W), tf.matmul(s, W))
@@ -166,6 +190,7 @@ class CombinedRewards(_Reward):
         coefs = np.ones(n) if coefs is None else check_entries(coefs, n, "coefs")
         self.coefs = gpflow.Parameter(coefs, trainable=False)
 
+    @inherit_check_shapes
     def moments(self, m, s):
         mean = 0.0
         var = 0.0
@@ -202,6 +227,7 @@ class CartPoleReward(_Reward):
         self._t = tf.constant([[0.0, 0.0, 0.0, np.pi, np.sin(np.pi), np.cos(np.pi)]],
                               dtype=default_float())
 
+    @inherit_check_shapes
     def moments(self, m, s):
         Mt, St, Ct = trig_moments(m, s, [3])
         cross = tf.matmul(s, Ct)
@@ -260,6 +286,7 @@ class LinearMapReward(_Reward):
         self.A = gpflow.Parameter(A, trainable=False)
         self.b = gpflow.Parameter(b.reshape(1, K), trainable=False)
 
+    @inherit_check_shapes
     def moments(self, m, s):
         A = tf.convert_to_tensor(self.A)
         mz = tf.matmul(m, A, transpose_b=True) + tf.convert_to_tensor(self.b)  # [1, K]

@@ -73,7 +73,7 @@ def sparse_agent(seed=1):
 def outputs(agent, states):
     """What must not change across a save/load: actions and the predicted rollout."""
     actions = np.concatenate([agent.compute_action(x) for x in states])
-    m, s, r = (t.numpy() for t in agent.predict())
+    m, s, r = agent.predict()  # NumPy arrays
     return dict(actions=actions, m=m, s=s, r=r)
 
 

@@ -32,6 +32,18 @@ it is alone it still shapes the prediction. Training, :meth:`MGPR.factorize` (so
 matching and the policy search), :meth:`MGPR.predict_f` and
 :meth:`MGPR.log_marginal_likelihood` use the factors; they need the plain GPR outputs
 this class builds (not a sparse model).
+
+GPflow conventions: :class:`MGPR` is a ``gpflow.models.BayesianModel`` with its data
+inside (``InternalDataTrainingLossMixin``): :meth:`~MGPR.training_loss` (what
+:meth:`~MGPR.optimize` minimises, so ``gpflow.optimizers.Scipy().minimize(
+model.training_loss, model.trainable_variables)`` trains it too),
+:meth:`~MGPR.maximum_log_likelihood_objective`, ``log_prior_density``,
+``training_loss_closure``; :meth:`~MGPR.predict_f`, :meth:`~MGPR.predict_y` and
+:meth:`~MGPR.predict_log_density` as GPflow defines them for P = E independent outputs.
+Every public computation returns tensors and runs inside ``tf.function``; its inputs
+follow :mod:`pilco.validation.inputs` (converted to float64, checked before TensorFlow
+sees them). ``print_summary`` lists the hyperparameters only (the data are not
+parameters).
 """
 from __future__ import annotations
 
@@ -41,6 +53,9 @@ from typing import Callable, Dict, List, Optional
 import gpflow
 import numpy as np
 import tensorflow as tf
+from check_shapes import check_shapes, inherit_check_shapes
+from gpflow.models.training_mixins import InternalDataTrainingLossMixin
+from gpflow.utilities.model_utils import add_noise_cov
 
 from .. import moments
 from ..seeding import generator
@@ -50,10 +65,13 @@ from ..validation import (
     check_gaussian,
     check_min_rel_improvement,
     check_noise_scales,
+    check_pair,
+    check_points,
     check_positive_float,
     check_positive_int,
     check_ratio_bound,
     check_seed,
+    checked_arguments,
 )
 
 __all__ = ["MGPR"]
@@ -67,13 +85,61 @@ def _assign_free(param: gpflow.Parameter, value) -> None:
         param.assign(value)
 
 
-class MGPR(gpflow.base.Module):
+class _SharedDataGPR(gpflow.models.GPR):
+    """A ``gpflow.models.GPR`` whose data are variables its :class:`MGPR` owns: they are
+    not listed among its parameters (``print_summary``, ``parameter_dict``) a second time."""
+
+    _TF_MODULE_IGNORED_PROPERTIES = (gpflow.models.GPR._TF_MODULE_IGNORED_PROPERTIES
+                                     | frozenset({"data"}))
+
+
+def _check_Xnew(model: "MGPR", arguments) -> None:
+    arguments["Xnew"] = check_points(arguments["Xnew"], model.num_dims, "Xnew")
+
+
+def _check_data_pair(model: "MGPR", arguments) -> None:
+    X, Y = check_pair(arguments["data"], "data")
+    X = check_points(X, model.num_dims, "data X")
+    Y = check_points(Y, model.num_outputs, "data Y")
+    rows_X, rows_Y = X.shape[0], Y.shape[0]  # None when traced with unknown sizes
+    if rows_X is not None and rows_Y is not None and rows_X != rows_Y:
+        raise ValueError(f"data: X and Y must have the same number of rows, got "
+                         f"{rows_X} and {rows_Y}")
+    arguments["data"] = (X, Y)
+
+
+def _check_input_gaussian(model: "MGPR", arguments) -> None:
+    arguments["m"], arguments["s"] = check_gaussian(arguments["m"], arguments["s"],
+                                                    model.num_dims, "input")
+
+
+def _output_covariance(var, full_cov: bool, full_output_cov: bool):
+    """Variances of independent outputs in GPflow's layout: [N, E] or [E, N, N] (full_cov)
+    -> with ``full_output_cov`` the diagonal output covariances [N, E, E] or the full
+    covariance [N, E, N, E] (zero between outputs)."""
+    if not full_output_cov:
+        return var
+    if not full_cov:
+        return tf.linalg.diag(var)
+    eye = tf.eye(tf.shape(var)[0], dtype=var.dtype)
+    return tf.einsum("enm,ef->nemf", var, eye)
+
+
+class MGPR(InternalDataTrainingLossMixin, gpflow.models.BayesianModel):
     """E independent GPs on shared inputs: ``X [N, D] -> Y [N, E]``.
 
     ``models[i]`` is the ``gpflow.models.GPR`` of output i; assign hyperparameters on
     ``models[i].kernel.lengthscales``, ``.kernel.variance`` and ``.likelihood.variance``.
     The data live in ``tf.Variable``s, so :meth:`set_data` never invalidates compiled code.
+    A GPflow model (see the module doc): train it with :meth:`optimize` or any GPflow
+    optimiser on :meth:`training_loss`, predict with :meth:`predict_f`,
+    :meth:`predict_y`, :meth:`predict_log_density` and, at a Gaussian input,
+    :meth:`predict_on_noisy_inputs`.
     """
+
+    # the data (their own variables) are not parameters: print_summary shows none of them
+    _TF_MODULE_IGNORED_PROPERTIES = (gpflow.models.BayesianModel._TF_MODULE_IGNORED_PROPERTIES
+                                     | frozenset({"_X", "_Y", "_noise_scales"}))
 
     def __init__(self, data, noise_floor: float = 1e-6, max_snr: float = 500.0,
                  max_lengthscale_ratio: float = 100.0, name: Optional[str] = None):
@@ -108,7 +174,7 @@ class MGPR(gpflow.base.Module):
 
     def _build_models(self, X, Y):
         return [
-            gpflow.models.GPR(
+            _SharedDataGPR(
                 (self._X, self._Y[i]), kernel=self._new_kernel(), likelihood=self._new_likelihood()
             )
             for i in range(self.num_outputs)
@@ -233,26 +299,104 @@ class MGPR(gpflow.base.Module):
                                  noise_scales=tf.convert_to_tensor(self._noise_scales))
 
     # -- prediction -----------------------------------------------------------------------
+    @checked_arguments(_check_input_gaussian)
+    @check_shapes(
+        "m: [1, D]",
+        "s: [D, D]",
+        "return[0]: [1, E]",
+        "return[1]: [E, E]",
+        "return[2]: [D, E]",
+    )
     def predict_on_noisy_inputs(self, m, s):
         """Moments of f(x) at x ~ N(m, s), exactly.
 
-        Shapes: m [1, D], s [D, D] -> M [1, E], S [E, E], V [D, E] with
+        Shapes: m [1, D] (or [D]), s [D, D] -> M [1, E], S [E, E], V [D, E] with
         ``V = inv(s) Cov[x, f(x)]``. ``S`` is the latent covariance (no observation noise).
         """
-        m, s = check_gaussian(m, s, self.num_dims, "input")
         return moments.moment_match(m, s, self.factorize())
 
-    def predict_f(self, Xnew):
-        """Latent mean and variance at deterministic inputs: [N*, D] -> ([N*, E], [N*, E])."""
-        if self._scaled():  # GPflow's models know one noise variance per output
-            f = self.factorize()
-            Xnew = tf.convert_to_tensor(Xnew, dtype=f.centers.dtype)
-            Ks = moments.se_kernel(Xnew, f.lengthscales, f.variance, f.centers)  # [E, N*, n]
-            mean = tf.transpose(tf.reduce_sum(Ks * f.beta[:, None, :], axis=-1))
-            quad = tf.reduce_sum(tf.matmul(Ks, f.iK) * Ks, axis=-1)  # [E, N*]
-            return mean, tf.transpose(f.variance[:, None] - quad)
-        means, vars_ = zip(*(m.predict_f(Xnew) for m in self.models))
-        return tf.concat(means, axis=1), tf.concat(vars_, axis=1)
+    def _latent(self, Xnew, full_cov: bool):
+        """Latent mean [N*, E] and variance [N*, E] or covariance [E, N*, N*]."""
+        if not self._batchable():  # sparse or replaced models: their own predictions
+            means, vars_ = zip(*(m.predict_f(Xnew, full_cov=full_cov) for m in self.models))
+            return tf.concat(means, axis=1), tf.concat(vars_, axis=1 - int(full_cov))
+        # GPflow's GPR prediction (its kernels and conditional) with each transition's
+        # noise variance scaled by its factor: GPR's own numbers when the factors are 1
+        X = tf.convert_to_tensor(self._X)
+        scales = tf.convert_to_tensor(self._noise_scales)
+        means, vars_ = [], []
+        for e, model in enumerate(self.models):
+            noise = tf.convert_to_tensor(model.likelihood.variance) * scales[e]
+            Kmm = add_noise_cov(model.kernel(X), noise)
+            Kmn = model.kernel(X, Xnew)
+            Knn = model.kernel(Xnew, full_cov=full_cov)
+            mean, var = gpflow.conditionals.base_conditional(
+                Kmn, Kmm, Knn, tf.convert_to_tensor(self._Y[e]), full_cov=full_cov,
+                white=False)
+            means.append(mean)
+            vars_.append(var)
+        return tf.concat(means, axis=1), tf.concat(vars_, axis=1 - int(full_cov))
+
+    @checked_arguments(_check_Xnew)
+    @check_shapes(
+        "Xnew: [N, D]",
+        "return[0]: [N, E]",
+        "return[1]: [N, E, N, E] if full_cov and full_output_cov",
+        "return[1]: [E, N, N] if full_cov and (not full_output_cov)",
+        "return[1]: [N, E, E] if (not full_cov) and full_output_cov",
+        "return[1]: [N, E] if (not full_cov) and (not full_output_cov)",
+    )
+    def predict_f(self, Xnew, full_cov: bool = False, full_output_cov: bool = False):
+        """Latent mean and variance at deterministic inputs, as GPflow defines them.
+
+        Shapes: Xnew [N*, D] -> mean [N*, E] and variance [N*, E]; with ``full_cov`` the
+        covariance between the inputs [E, N*, N*], with ``full_output_cov`` the covariance
+        between the outputs ([N*, E, E], or [N*, E, N*, E] with both; the outputs are
+        independent, so it is zero off the outputs' diagonal). The noise factors of the
+        training transitions (``noise_scales``) are used.
+        """
+        mean, var = self._latent(Xnew, bool(full_cov))
+        return mean, _output_covariance(var, bool(full_cov), bool(full_output_cov))
+
+    @checked_arguments(_check_Xnew)
+    @check_shapes(
+        "Xnew: [N, D]",
+        "return[0]: [N, E]",
+        "return[1]: [N, E, N, E] if full_cov and full_output_cov",
+        "return[1]: [E, N, N] if full_cov and (not full_output_cov)",
+        "return[1]: [N, E, E] if (not full_cov) and full_output_cov",
+        "return[1]: [N, E] if (not full_cov) and (not full_output_cov)",
+    )
+    def predict_y(self, Xnew, full_cov: bool = False, full_output_cov: bool = False):
+        """Mean and variance of new observations: :meth:`predict_f` plus each output's
+        noise variance (that of a new transition, factor 1), on the diagonal when
+        ``full_cov``. Shapes as :meth:`predict_f`."""
+        full_cov = bool(full_cov)
+        mean, var = self._latent(Xnew, full_cov)
+        noise = self.noise_variance  # [E]
+        if full_cov:
+            var = add_noise_cov(var, noise[:, None])
+        else:
+            var = var + noise
+        return mean, _output_covariance(var, full_cov, bool(full_output_cov))
+
+    @checked_arguments(_check_data_pair)
+    @check_shapes(
+        "data[0]: [N, D]",
+        "data[1]: [N, E]",
+        "return: [N]",
+    )
+    def predict_log_density(self, data, full_cov: bool = False,
+                            full_output_cov: bool = False):
+        """Log density of observations ``data = (X [N, D], Y [N, E])`` under
+        :meth:`predict_y`, summed over the outputs: [N]. As in GPflow, only the
+        point-wise density is available (``full_cov`` and ``full_output_cov`` False)."""
+        if full_cov or full_output_cov:
+            raise NotImplementedError("predict_log_density is point-wise: full_cov and "
+                                      "full_output_cov must be False (as in GPflow)")
+        X, Y = data
+        mean, var = self.predict_y(X)
+        return tf.reduce_sum(gpflow.logdensities.gaussian(Y, mean, var), axis=-1)
 
     # -- training -------------------------------------------------------------------------
     def _penalty(self, model) -> tf.Tensor:
@@ -286,7 +430,7 @@ class MGPR(gpflow.base.Module):
         a Gaussian likelihood and a zero mean (the models this class builds): their losses
         can then be computed as one batch (:meth:`_batched_losses`)."""
         return all(
-            type(m) is gpflow.models.GPR
+            type(m) in (gpflow.models.GPR, _SharedDataGPR)
             and type(m.kernel) is gpflow.kernels.SquaredExponential
             and m.kernel.active_dims == slice(None, None, None)
             and type(m.likelihood) is gpflow.likelihoods.Gaussian
@@ -335,14 +479,34 @@ class MGPR(gpflow.base.Module):
     def _model_losses(self) -> np.ndarray:
         return self._output_losses().numpy().astype(np.float64)
 
-    def _training_loss(self):
+    @inherit_check_shapes
+    def _training_loss(self) -> tf.Tensor:
+        """The outputs' losses summed (what :meth:`training_loss` returns)."""
         return tf.reduce_sum(self._output_losses())
 
-    def log_marginal_likelihood(self) -> np.ndarray:
-        """Log evidence of each output's GP, [E] (priors excluded)."""
-        if self._scaled():
-            return self._batched_losses(with_penalties=False).numpy().astype(np.float64)
-        return np.array([float(m.log_marginal_likelihood().numpy()) for m in self.models])
+    @inherit_check_shapes
+    def maximum_log_likelihood_objective(self) -> tf.Tensor:
+        """The penalised log evidence: the outputs' log evidence minus the soft bounds on
+        the signal-to-noise ratios and lengthscales (module doc), summed. The training
+        loss is minus this plus the log prior density (equal up to rounding)."""
+        if self._batchable():
+            ell, sf2, sn2 = self.hyperparameters()
+            objective = (self._batched_losses(with_penalties=False)
+                         - self._penalties(ell, sf2, sn2))
+        else:
+            objective = tf.stack([m.maximum_log_likelihood_objective() - self._penalty(m)
+                                  for m in self.models])
+        return tf.reduce_sum(objective)
+
+    @check_shapes("return: [E]")
+    def log_marginal_likelihood(self) -> tf.Tensor:
+        """Log evidence of each output's GP, [E] (priors and soft bounds excluded)."""
+        per_model = lambda: tf.stack(  # noqa: E731 - GPflow's own value per output
+            [m.log_marginal_likelihood() for m in self.models])
+        if not self._batchable():
+            return per_model()
+        scaled = tf.reduce_any(tf.not_equal(tf.convert_to_tensor(self._noise_scales), 1.0))
+        return tf.cond(scaled, lambda: self._batched_losses(with_penalties=False), per_model)
 
     def optimize(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
                  callback: Optional[Callable[[int], None]] = None,
@@ -400,7 +564,7 @@ class MGPR(gpflow.base.Module):
                 self.initialize_hyperparameters(rng, spread=0.5)
             opt.start_run()
             try:
-                opt.minimize(self._training_loss, self.trainable_variables,
+                opt.minimize(self.training_loss, self.trainable_variables,
                              options=dict(maxiter=maxiter), method="L-BFGS-B",
                              step_callback=opt.step_callback(callback, min_rel_improvement,
                                                              patience, what="GP loss"))

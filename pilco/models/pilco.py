@@ -12,6 +12,12 @@ task (e.g. the target position) as ``context_indices`` (constant through an epis
 read by the policy, not predicted) and give one start distribution per training task
 (``m_init [T, D]``, each row holding its task's context): the policy objective is the
 sum of the T tasks' expected returns.
+
+Return types: the agent's user-facing methods (predictions, actions, expected returns)
+return NumPy arrays (Python floats for single numbers) and run eagerly; the model, the
+policy and the reward inside it (:class:`MGPR`, :mod:`pilco.controllers`,
+:mod:`pilco.rewards`) are TensorFlow modules whose methods return tensors and run inside
+``tf.function``.
 """
 from __future__ import annotations
 
@@ -22,6 +28,7 @@ from typing import Callable, Optional, Sequence
 import gpflow
 import numpy as np
 import tensorflow as tf
+from check_shapes import check_shapes
 
 from ..seeding import generator
 from ..validation import (
@@ -34,8 +41,9 @@ from ..validation import (
     check_positive_int,
     check_reward,
     check_seed,
-    check_state_row,
+    check_states,
     check_transitions,
+    checked_arguments,
 )
 from . import storage
 from .layout import StateLayout
@@ -47,6 +55,27 @@ from .starts import check_spread, check_starts, check_task
 from .transitions import Transitions
 
 __all__ = ["PILCO", "POLICY_METHODS"]
+
+
+def _check_start(agent: "PILCO", arguments) -> None:
+    """The start of a prediction checked, the missing half from the task's start."""
+    m, s = agent._start(arguments["m"], arguments["s"], arguments["task"])
+    arguments.update(m=m, s=s, task=None)
+
+
+def _check_state_gaussian(agent: "PILCO", arguments) -> None:
+    arguments["m"], arguments["s"] = check_gaussian(arguments["m"], arguments["s"],
+                                                    agent.state_dim, "state")
+
+
+def _check_transition_inputs(agent: "PILCO", arguments) -> None:
+    arguments["X"] = check_columns(arguments["X"], agent.state_dim + agent.control_dim, "X",
+                                   "(state, then action)")
+
+
+def _check_measured_states(agent: "PILCO", arguments) -> None:
+    x = check_states(arguments["x"], agent.state_dim, "state")
+    arguments["x"] = x.reshape(1, -1) if x.ndim == 1 else x
 
 logger = logging.getLogger(__name__)
 
@@ -315,6 +344,12 @@ class PILCO(gpflow.base.Module):
         gives raw ones. ``noise_scales``: as in :meth:`set_data`."""
         self._transitions.replace_gp_data(self.mgpr, gp_data, noise_scales)
 
+    @checked_arguments(_check_transition_inputs)
+    @check_shapes(
+        "X: [N, DU]",
+        "return[0]: [N, D]",
+        "return[1]: [N, D]",
+    )
     def one_step_prediction(self, X):
         """Predicted state differences ``x_{t+1} - x_t`` at raw transition inputs.
 
@@ -322,15 +357,14 @@ class PILCO(gpflow.base.Module):
         variance [N, D] (NumPy), the GP's latent variance plus its noise variance (0 and
         0 in the context dimensions, which do not change).
         """
-        X = check_columns(X, self.state_dim + self.control_dim, "X", "(state, then action)")
         mean, var = self.mgpr.predict_f(self.gp_inputs(X))
         var = np.asarray(var) + np.asarray(self.mgpr.noise_variance)
-        return self.layout.to_state(mean), self.layout.to_state(var)
+        return self.layout.to_state(np.asarray(mean)), self.layout.to_state(var)
 
     # -- prediction -------------------------------------------------------------------------
-    def _initial(self, m, s, horizon, task):
-        """The start of a prediction: ``m``, ``s`` as given, the missing ones from the
-        start distribution of ``task`` (which may be omitted with one task)."""
+    def _start(self, m, s, task):
+        """The start of a prediction checked: ``m``, ``s`` as given, the missing ones
+        from the start distribution of ``task`` (which may be omitted with one task)."""
         if m is None or s is None:
             if task is None:
                 if self.num_tasks > 1:
@@ -345,17 +379,34 @@ class PILCO(gpflow.base.Module):
                 s = self._rollout.S_init.numpy()[task]
         elif task is not None:
             raise ValueError("give either task or the start (m, s), not both")
-        m, s = check_gaussian(m, s, self.state_dim, "initial state")
+        return check_gaussian(m, s, self.state_dim, "initial state")
+
+    def _horizon_tensor(self, horizon):
         H = self.horizon if horizon is None else check_positive_int(horizon, "horizon")
         self._rollout.refresh(self.mgpr)
-        return m, s, tf.constant(H)
+        return tf.constant(H)
 
+    @checked_arguments(_check_state_gaussian)
+    @check_shapes(
+        "m: [1, D]",
+        "s: [D, D]",
+        "return[0]: [1, D]",
+        "return[1]: [D, D]",
+    )
     def propagate(self, m, s):
         """One predicted step. Shapes: m [1, D], s [D, D] -> m' [1, D], s' [D, D]."""
-        m, s = check_gaussian(m, s, self.state_dim, "state")
         self._rollout.refresh(self.mgpr)
-        return self._rollout.step(m, s, self._rollout.dynamics(), self.controller.prepare())
+        out = self._rollout.step(m, s, self._rollout.dynamics(), self.controller.prepare())
+        return tuple(t.numpy() for t in out)
 
+    @checked_arguments(_check_start)
+    @check_shapes(
+        "m: [1, D]",
+        "s: [D, D]",
+        "return[0]: [1, D]",
+        "return[1]: [D, D]",
+        "return[2]: [1, 1]",
+    )
     def predict(self, m=None, s=None, horizon: Optional[int] = None,
                 task: Optional[int] = None):
         """Predicted final state and total expected reward of steps 1..H.
@@ -363,8 +414,16 @@ class PILCO(gpflow.base.Module):
         Shapes: m [1, D], s [D, D] (default: the start distribution of ``task``, which
         may be omitted when there is one) -> m_H [1, D], S_H [D, D], total_reward [1, 1].
         """
-        return self._rollout.total_reward(*self._initial(m, s, horizon, task))
+        out = self._rollout.total_reward(m, s, self._horizon_tensor(horizon))
+        return tuple(t.numpy() for t in out)
 
+    @checked_arguments(_check_start)
+    @check_shapes(
+        "m: [1, D]",
+        "s: [D, D]",
+        "return[0]: [H1, D]",
+        "return[1]: [H1, D, D]",
+    )
     def predict_trajectory(self, m=None, s=None, horizon: Optional[int] = None,
                            task: Optional[int] = None):
         """Predicted state distributions of steps 0..H.
@@ -372,13 +431,23 @@ class PILCO(gpflow.base.Module):
         Shapes: m [1, D], s [D, D] -> M [H+1, D], S [H+1, D, D] (index 0 is the start);
         defaults as :meth:`predict`.
         """
-        M, S, _, _ = self.predict_trajectory_with_rewards(m, s, horizon, task)
+        M, S, _, _ = self.predict_trajectory_with_rewards(m, s, horizon)
         return M, S
 
+    @checked_arguments(_check_start)
+    @check_shapes(
+        "m: [1, D]",
+        "s: [D, D]",
+        "return[0]: [H1, D]",
+        "return[1]: [H1, D, D]",
+        "return[2]: [H1]",
+        "return[3]: [H1]",
+    )
     def predict_trajectory_with_rewards(self, m=None, s=None, horizon: Optional[int] = None,
                                         task: Optional[int] = None):
         """As :meth:`predict_trajectory`, plus the reward mean [H+1] and variance [H+1]."""
-        return self._rollout.trajectory(*self._initial(m, s, horizon, task))
+        out = self._rollout.trajectory(m, s, self._horizon_tensor(horizon))
+        return tuple(t.numpy() for t in out)
 
     # -- learning ---------------------------------------------------------------------------
     def optimize_models(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
@@ -402,6 +471,7 @@ class PILCO(gpflow.base.Module):
         self._rollout.refresh(self.mgpr)
         return float(-self._rollout.policy_loss().numpy())
 
+    @check_shapes("return: [T]")
     def expected_returns(self) -> np.ndarray:
         """Total expected reward of the current policy from each task's start
         distribution: [T] (their sum is :meth:`expected_return`)."""
@@ -462,11 +532,18 @@ class PILCO(gpflow.base.Module):
         return 0 if last is None else int(last.evaluations)
 
     # -- acting -----------------------------------------------------------------------------
+    @checked_arguments(_check_measured_states)
+    @check_shapes(
+        "x: [N, D]",
+        "return: [N, U]",
+    )
     def compute_action(self, x) -> np.ndarray:
-        """The policy's action at a measured state: x [1, D] (or [D]) -> u [1, U] (the
-        whole state, context included; the policy reads its dimensions)."""
-        x = check_state_row(x, self.state_dim, "state")
-        return self._rollout.action(tf.convert_to_tensor(x)).numpy()
+        """The policy's action at measured states: x [N, D] -> u [N, U], one state [D]
+        or [1, D] -> [1, U] (the whole state, context included; the policy reads its
+        dimensions). The same actions as the exported policy
+        (:func:`pilco.deploy.load_policy`), row by row."""
+        rows = [self._rollout.action(tf.convert_to_tensor(row[None, :])).numpy() for row in x]
+        return np.concatenate(rows, axis=0)
 
     # -- files ------------------------------------------------------------------------------
     def save(self, path) -> str:

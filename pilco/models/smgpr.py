@@ -7,6 +7,7 @@ from typing import Optional
 import gpflow
 import numpy as np
 import tensorflow as tf
+from check_shapes import check_shapes
 from gpflow.config import default_jitter
 
 from .. import moments
@@ -20,7 +21,11 @@ logger = logging.getLogger(__name__)
 
 
 class _FITC(gpflow.models.GPRFITC):
-    """GPflow's FITC regression whose data count follows data held in resizable variables."""
+    """GPflow's FITC regression whose data count follows data held in resizable variables
+    (the :class:`SMGPR`'s: not listed among this model's parameters a second time)."""
+
+    _TF_MODULE_IGNORED_PROPERTIES = (gpflow.models.GPRFITC._TF_MODULE_IGNORED_PROPERTIES
+                                     | frozenset({"data"}))
 
     @property
     def num_data(self):
@@ -73,10 +78,10 @@ class SMGPR(MGPR):
         ell, sf2, sn2 = self.hyperparameters()
         return moments.fitc_factorize(self.X, self.Y, self.Z, ell, sf2, sn2, default_jitter())
 
-    def log_marginal_likelihood(self) -> np.ndarray:
+    @check_shapes("return: [E]")
+    def log_marginal_likelihood(self) -> tf.Tensor:
         """FITC approximation of each output's log evidence, [E] (priors excluded)."""
-        return np.array([float(m.maximum_log_likelihood_objective().numpy())
-                         for m in self.models])
+        return tf.stack([m.maximum_log_likelihood_objective() for m in self.models])
 
     def _check_noise_scales_supported(self) -> None:
         raise ValueError("SMGPR (FITC) has one noise variance per output: noise_scales "

@@ -104,8 +104,11 @@ def _pair_exponent_factors(T, iiI, iiJ, kI, kJ):
     """
     aI = tf.matmul(T, iiI)
     aJ = tf.matmul(T, iiJ)
-    u = kI + 0.5 * tf.reduce_sum(aI * iiI, axis=1)
-    v = kJ + 0.5 * tf.reduce_sum(aJ * iiJ, axis=1)
+    # add_n, not +: kI and kJ may be matrix products (the policy's), and a product
+    # followed by an addition is a pattern TensorFlow's oneDNN graph rewrite inspects and
+    # refuses for float64 with a warning line each time (the same sum either way)
+    u = tf.math.add_n([kI, 0.5 * tf.reduce_sum(aI * iiI, axis=1)])
+    v = tf.math.add_n([kJ, 0.5 * tf.reduce_sum(aJ * iiJ, axis=1)])
     u, v = tf.expand_dims(u, 1), tf.expand_dims(v, 1)
     ones = tf.ones_like(u)
     leftT = tf.concat([aI, u, ones], axis=1)
@@ -166,9 +169,12 @@ def _pair_second_moments(T, mI, mJ, kI, kJ, XI, XJ, bI, bJ, iK):
             g1 = tf.expand_dims(g, 1)
             r = g1 * Qb  # [P, n], d/du
             c = g1 * bQ  # [P, n], d/dv
+            # the halves inside the products (exact: a power of two) and a sum of
+            # three products, which TensorFlow's oneDNN rewrite leaves alone (a product
+            # scaled and added draws a float64 warning line from it)
             dT = (tf.matmul(iiI, tf.expand_dims(g1, 2) * GJ)
-                  + 0.5 * tf.matmul(iiI * r[:, None, :], iiI, transpose_b=True)
-                  + 0.5 * tf.matmul(iiJ * c[:, None, :], iiJ, transpose_b=True))
+                  + tf.matmul(iiI * (0.5 * r)[:, None, :], iiI, transpose_b=True)
+                  + tf.matmul(iiJ * (0.5 * c)[:, None, :], iiJ, transpose_b=True))
             dm = -(tf.linalg.matvec(aI, r) + tf.linalg.matvec(aJ, c))
             return dT, dm, dm, r, c
 

@@ -13,6 +13,8 @@ module             checks
 ``scalars``        counts, positive numbers, seeds, flags, options, indices
 ``components``     controllers, rewards, squash and other functions
 ``files``          file paths, the format version recorded in a pilco file
+``inputs``         the inputs of prediction methods, eager or traced (the rule of
+                   conversion to float64 and what is checked when)
 =================  ==============================================================
 
 The package imports only NumPy and the standard library at import time (the NumPy-only
@@ -61,6 +63,7 @@ from .arrays import (as_2d_float, check_columns, check_data, check_entries, chec
 from .components import (check_callable, check_controller, check_reward, check_reward_list,
                          check_squash)
 from .files import check_format_version, check_path
+from .inputs import check_points, checked_arguments
 from .scalars import (check_bool, check_indices, check_min_rel_improvement,
                       check_non_negative_float, check_option, check_positive_float,
                       check_positive_int, check_ratio_bound, check_seed)
@@ -97,4 +100,6 @@ __all__ = [
     "check_pair",
     "check_path",
     "check_format_version",
+    "check_points",
+    "checked_arguments",
 ]

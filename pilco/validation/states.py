@@ -25,12 +25,7 @@ def check_state_row(x, dim: int, name: str = "state") -> np.ndarray:
 
 def check_states(state, dim: int, name: str = "state") -> np.ndarray:
     """One measured state [dim] or a batch [N, dim] of finite numbers, as float64."""
-    if isinstance(state, (str, bytes)) or state is None:
-        raise TypeError(f"{name} must be an array of numbers, got {type(state).__name__}")
-    try:
-        x = np.asarray(state, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise TypeError(f"{name} must be an array of numbers: {err}") from None
+    x = _to_numpy(state, name)  # strings, booleans, ragged lists: TypeError
     if x.ndim not in (1, 2):
         raise ValueError(f"{name} must have shape [{dim}] or [N, {dim}], got {x.shape}")
     if x.shape[-1] != dim:
@@ -68,8 +63,14 @@ def check_gaussian(m, s, dim: int, name: str = "state"):
 
     Shapes: m [1, dim] (or [dim]), s [dim, dim] -> m [1, dim], s [dim, dim].
     TensorFlow inputs are checked by value and returned as tensors derived from the
-    originals, so a gradient tape watching them still connects to the outputs.
+    originals, so a gradient tape watching them still connects to the outputs. Inside a
+    traced ``tf.function`` their shapes are checked when tracing and their finiteness when
+    run (:mod:`pilco.validation.inputs`).
     """
+    from .inputs import check_symbolic_gaussian, is_symbolic
+
+    if is_symbolic(m) or is_symbolic(s):  # traced: shapes now, finiteness when run
+        return check_symbolic_gaussian(m, s, dim, name)
     m_in, s_in = m, s
     m = _to_numpy(m, f"{name} mean")
     if m.ndim == 1:
