@@ -104,7 +104,7 @@ def _load_summary(d):
         return json.load(f)
 
 
-def _check_summary(s, task, episodes, extra=()):
+def _check_summary(s, task, episodes, extra=(), episode_extra=None):
     assert set(s) == SUMMARY_KEYS | set(extra)
     assert s["task"] == task
     assert isinstance(s["seed"], int) and s["seed"] == 0
@@ -118,7 +118,7 @@ def _check_summary(s, task, episodes, extra=()):
     assert all(isinstance(v, float) and v >= 0 for v in s["seconds"].values())
     assert len(s["episodes"]) == episodes
     for i, e in enumerate(s["episodes"], start=1):
-        assert set(e) == EPISODE_KEYS
+        assert set(e) == EPISODE_KEYS | set((episode_extra or {}).get(i, ()))
         assert e["episode"] == i
         assert isinstance(e["random"], bool) and e["random"] == (i == 1)
         assert isinstance(e["steps"], int) and e["steps"] >= 1
@@ -216,11 +216,15 @@ def test_adaptation(runs):
     pytest.importorskip("mujoco")
     d, out = _ok(runs["adaptation"])
     s = _load_summary(d)
-    _check_summary(s, "adaptation", 4, extra=("damage_at_episode", "episodes_to_recover",
-                                              "stuck_joints", "joint_follow_ratio"))
+    _check_summary(s, "adaptation", 4, extra=("healthy_reached_at_episode",
+                                              "damage_at_episode", "episodes_to_recover",
+                                              "stuck_joints", "joint_follow_ratio"),
+                   episode_extra={4: ("replanned",)})  # the first damaged episode re-plans
     assert s["damage_at_episode"] == 4  # both healthy episodes ran, reached or not
+    assert s["healthy_reached_at_episode"] in (None, 2, 3)
     # the first damaged episode found the stuck elbow (action 3): it never moved
     assert s["stuck_joints"] == [3] and s["joint_follow_ratio"][3] == 0.0
+    assert s["episodes"][3]["replanned"]["stuck_joints"] == [3]
     assert s["episodes_to_recover"] is None or s["episodes_to_recover"] == 1
     assert s["success"] == (s["episodes_to_recover"] is not None) and s["complete"] is True
     _check_data(d, s, 10, 7)
