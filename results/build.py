@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import sys
@@ -60,7 +61,7 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))      # this checkout's pilco, also when run as a script
 
-from pilco.sweep.aggregate import aggregate_setting  # noqa: E402
+from pilco.sweep.aggregate import aggregate_setting, quantile  # noqa: E402
 
 RESULTS_DIR = ROOT / "results"
 TABLE_FILE = RESULTS_DIR / "table.json"
@@ -554,16 +555,6 @@ def _healthy_reached(run: Mapping[str, Any]) -> Any:
     return first if first is not None and first < damage else None
 
 
-def _median(values: Sequence[float]) -> Optional[float]:
-    import math
-
-    if not values:
-        return None
-    ordered = sorted(math.inf if v is None else v for v in values)
-    k = len(ordered) // 2
-    return ordered[k] if len(ordered) % 2 else (ordered[k - 1] + ordered[k]) / 2
-
-
 def scratch_text(data: Mapping[str, Any], exports: Mapping[str, Mapping[str, Any]],
                  scratch: str, setting: str) -> str:
     """The adaptation's recovery against learning the damaged arm from scratch on the same
@@ -575,8 +566,8 @@ def scratch_text(data: Mapping[str, Any], exports: Mapping[str, Mapping[str, Any
     pairs = paired_recovery(data, exports[scratch], setting)
     if not pairs:
         return f"no seed in common with `{scratch}`"
-    ours = _median([p["episodes_to_recover"] for p in pairs])
-    theirs = _median([p["scratch_solved_at_episode"] for p in pairs])
+    ours, theirs = (quantile([math.inf if p[k] is None else p[k] for p in pairs], 0.5)
+                    for k in ("episodes_to_recover", "scratch_solved_at_episode"))
     return (f"on the damaged arm: {ours:g} episode(s) median to reach again, against "
             f"{theirs:g} learning from scratch (`{scratch}`, the same {len(pairs)} seeds)")
 

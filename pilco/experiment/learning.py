@@ -10,7 +10,7 @@ import numpy as np
 from .episode import Episode
 from .progress import optimizer_callback, progress_bar
 
-__all__ = ["train_model", "start_policy", "improve_policy", "learn_policy",
+__all__ = ["train_model", "start_policy", "improve_policy", "search_policy", "learn_policy",
            "predictions_before", "predictions_after"]
 
 logger = logging.getLogger(__name__)
@@ -49,7 +49,6 @@ def improve_policy(exp, number: int) -> float:
     The search starts from the agent's current policy (see :func:`learn_policy`).
     Returns the predicted return."""
     cfg, agent = exp.config, exp.agent
-    iters = cfg.policy_iterations(number)
     solved = exp.solved_at_episode() is not None
     restarts = cfg.policy_restarts_at(number, solved)
     spread = cfg.start_mixture_at(solved)
@@ -58,17 +57,9 @@ def improve_policy(exp, number: int) -> float:
     exp.policy_notes = {}
     if exp.before_policy_search is not None:
         exp.before_policy_search(agent, number)
-    # XLA is asked for only when chosen: agents without the option keep working
-    compiler = {"jit_compile": True} if cfg.policy_compiler == "xla" else {}
 
     def search(what: str, runs: int) -> float:
-        with progress_bar(iters * runs, f"episode {number} {what}", cfg.quiet) as bar:
-            return agent.optimize_policy(
-                maxiter=iters, restarts=runs,
-                seed=exp.episode_seed(number), callback=optimizer_callback(bar),
-                method=cfg.policy_method,
-                min_rel_improvement=cfg.policy_early_stop_at(solved),
-                patience=cfg.policy_patience, **compiler)
+        return search_policy(exp, number, what, runs)
 
     expected = search("policy", restarts)
     check = cfg.fragile_check_at(solved)
@@ -77,6 +68,24 @@ def improve_policy(exp, number: int) -> float:
     logger.info("episode %d: predicted return %.3f over %d steps", number, expected,
                 agent.horizon)
     return expected
+
+
+def search_policy(exp, number: int, what: str = "policy", runs: int = 1) -> float:
+    """One ``optimize_policy`` of episode ``number``'s agent with the run's settings:
+    its iterations, seed, method, compiler and early stop (relative, from the run's
+    solved state), ``runs`` runs (restarts), a progress bar named ``what``. Returns the
+    best predicted return."""
+    cfg, agent = exp.config, exp.agent
+    iters = cfg.policy_iterations(number)
+    solved = exp.solved_at_episode() is not None
+    # XLA is asked for only when chosen: agents without the option keep working
+    compiler = {"jit_compile": True} if cfg.policy_compiler == "xla" else {}
+    with progress_bar(iters * runs, f"episode {number} {what}", cfg.quiet) as bar:
+        return agent.optimize_policy(
+            maxiter=iters, restarts=runs, seed=exp.episode_seed(number),
+            callback=optimizer_callback(bar), method=cfg.policy_method,
+            min_rel_improvement=cfg.policy_early_stop_at(solved),
+            patience=cfg.policy_patience, **compiler)
 
 
 def _unless_fragile(exp, number: int, spread: float, plain: float, search) -> float:

@@ -1,16 +1,20 @@
 """How the adaptation changes its agent's model and policy after the damage: the damage
 flag's lengthscale (``--damage-input``), the healthy data's noise factors per state
 dimension (``--changed-output-noise``), the joints found stuck and no longer commanded
-(``--stop-stuck-joints``). The settings are :class:`~pilco.tasks.adaptation.AdaptationSettings`.
+(``--stop-stuck-joints``), and the re-plan inside the first damaged episode once one is
+found (``--replan-stuck-joints``). The settings are :class:`~pilco.tasks.adaptation.AdaptationSettings`.
 """
 from __future__ import annotations
 
 import logging
+import time
+from types import SimpleNamespace
 from typing import TYPE_CHECKING, List, Sequence
 
 import numpy as np
 
 from ..experiment import Experiment, stack_transitions
+from ..experiment.learning import search_policy
 
 if TYPE_CHECKING:  # the settings class lives with the task, which imports this module
     from .adaptation import AdaptationSettings
@@ -201,8 +205,9 @@ class ReplanWhenStuck:
     with the new policy. Replans at most once; the agent's start state is restored after
     the search. The episode's record gets a ``replanned`` note (step, joints, predicted
     return, seconds); the pause counts as the episode's policy time, its search's
-    evaluations as the episode's. A replay of the run's learning (``python -m pilco.diagnose``) does
-    not redo the pause: its next policy search starts from the policy before it.
+    evaluations as the episode's. A replay of the run's learning (``python -m
+    pilco.diagnose``) does not redo the pause: its next policy search starts from the
+    policy before it.
 
     Use as ``exp.run_learned_episode(watch=ReplanWhenStuck(exp, s, first, number))``."""
 
@@ -228,34 +233,28 @@ class ReplanWhenStuck:
 
         return watched
 
-    def _stuck(self) -> List[int]:
-        from types import SimpleNamespace
+    def _so_far(self) -> SimpleNamespace:
+        """The episode's steps so far, as :func:`joint_follow_ratios` reads an episode."""
+        return SimpleNamespace(states=np.array(self.states), actions=np.array(self.actions))
 
-        so_far = SimpleNamespace(states=np.array(self.states), actions=np.array(self.actions))
+    def _stuck(self) -> List[int]:
+        so_far = self._so_far()
         commanded = np.sum(np.abs(so_far.actions), axis=0)
         joints = stuck_joints(self.exp.episodes[:self.first - 1], [so_far],
                               self.s.stuck_joint_ratio, self.joint_dims)
         return [j for j in joints if commanded[j] >= MIN_COMMANDED_ROTATION]
 
     def _replan(self, joints: List[int], x: np.ndarray) -> None:
-        import time
-        from types import SimpleNamespace
-
-        exp, agent, cfg = self.exp, self.exp.agent, self.exp.config
+        exp, agent = self.exp, self.exp.agent
         t0 = time.perf_counter()
         step = len(self.actions)
-        so_far = SimpleNamespace(states=np.array(self.states), actions=np.array(self.actions))
-        _mark_stuck(exp, joints, joint_follow_ratios([so_far], self.joint_dims), self.first)
+        _mark_stuck(exp, joints, joint_follow_ratios([self._so_far()], self.joint_dims),
+                    self.first)
         _stop_commanding(agent, joints)
         start = agent.m_init
         agent.m_init = x[None, :]
-        solved = exp.solved_at_episode() is not None
         try:
-            expected = agent.optimize_policy(
-                maxiter=cfg.policy_iterations(self.number), seed=exp.episode_seed(self.number),
-                method=cfg.policy_method, min_rel_improvement=cfg.policy_early_stop_at(solved),
-                patience=cfg.policy_patience,
-                **({"jit_compile": True} if cfg.policy_compiler == "xla" else {}))
+            expected = search_policy(exp, self.number, "policy (re-plan)")
         finally:
             agent.m_init = start
         seconds = time.perf_counter() - t0
