@@ -39,6 +39,16 @@ from .validation import (
 
 __all__ = ["squash_sin", "squash_sat", "LinearController", "RbfController"]
 
+#: shapes of the action moments at a Gaussian state: mean, covariance and
+#: ``V = inv(s) Cov[x, u]`` (``moments``, ``compute_action``)
+_ACTION_MOMENTS_SHAPES = check_shapes(
+    "m: [1, D]",
+    "s: [D, D]",
+    "return[0]: [1, U]",
+    "return[1]: [U, U]",
+    "return[2]: [D, U]",
+)
+
 logger = logging.getLogger(__name__)
 
 
@@ -126,13 +136,7 @@ class _SquashedController(gpflow.base.Module):
         """Moments of the unsquashed action: M [1, U], S [U, U], V [D, U]."""
         raise NotImplementedError
 
-    @check_shapes(
-        "m: [1, D]",
-        "s: [D, D]",
-        "return[0]: [1, U]",
-        "return[1]: [U, U]",
-        "return[2]: [D, U]",
-    )
+    @_ACTION_MOMENTS_SHAPES
     def moments(self, m, s, squash: bool = True, prepared=None):
         """Action moments. Shapes: m [1, D], s [D, D] -> M [1, U], S [U, U], V [D, U].
 
@@ -145,13 +149,7 @@ class _SquashedController(gpflow.base.Module):
         return M, S, V
 
     @checked_arguments(_check_state_gaussian)
-    @check_shapes(
-        "m: [1, D]",
-        "s: [D, D]",
-        "return[0]: [1, U]",
-        "return[1]: [U, U]",
-        "return[2]: [D, U]",
-    )
+    @_ACTION_MOMENTS_SHAPES
     def compute_action(self, m, s, squash: bool = True):
         """Action moments (tensors) with the input checked (:mod:`pilco.validation.inputs`:
         eager or inside ``tf.function``). Shapes as :meth:`moments`."""

@@ -78,6 +78,17 @@ __all__ = ["MGPR"]
 
 logger = logging.getLogger(__name__)
 
+#: shapes of a prediction at new inputs, GPflow's layout for ``full_cov`` and
+#: ``full_output_cov`` (``predict_f``, ``predict_y``)
+_PREDICTION_SHAPES = check_shapes(
+    "Xnew: [N, D]",
+    "return[0]: [N, E]",
+    "return[1]: [N, E, N, E] if full_cov and full_output_cov",
+    "return[1]: [E, N, N] if full_cov and (not full_output_cov)",
+    "return[1]: [N, E, E] if (not full_cov) and full_output_cov",
+    "return[1]: [N, E] if (not full_cov) and (not full_output_cov)",
+)
+
 
 def _assign_free(param: gpflow.Parameter, value) -> None:
     """Assign ``value`` unless ``param`` is fixed (non-trainable): set by the user, kept."""
@@ -338,14 +349,7 @@ class MGPR(InternalDataTrainingLossMixin, gpflow.models.BayesianModel):
         return tf.concat(means, axis=1), tf.concat(vars_, axis=1 - int(full_cov))
 
     @checked_arguments(_check_Xnew)
-    @check_shapes(
-        "Xnew: [N, D]",
-        "return[0]: [N, E]",
-        "return[1]: [N, E, N, E] if full_cov and full_output_cov",
-        "return[1]: [E, N, N] if full_cov and (not full_output_cov)",
-        "return[1]: [N, E, E] if (not full_cov) and full_output_cov",
-        "return[1]: [N, E] if (not full_cov) and (not full_output_cov)",
-    )
+    @_PREDICTION_SHAPES
     def predict_f(self, Xnew, full_cov: bool = False, full_output_cov: bool = False):
         """Latent mean and variance at deterministic inputs, as GPflow defines them.
 
@@ -359,14 +363,7 @@ class MGPR(InternalDataTrainingLossMixin, gpflow.models.BayesianModel):
         return mean, _output_covariance(var, bool(full_cov), bool(full_output_cov))
 
     @checked_arguments(_check_Xnew)
-    @check_shapes(
-        "Xnew: [N, D]",
-        "return[0]: [N, E]",
-        "return[1]: [N, E, N, E] if full_cov and full_output_cov",
-        "return[1]: [E, N, N] if full_cov and (not full_output_cov)",
-        "return[1]: [N, E, E] if (not full_cov) and full_output_cov",
-        "return[1]: [N, E] if (not full_cov) and (not full_output_cov)",
-    )
+    @_PREDICTION_SHAPES
     def predict_y(self, Xnew, full_cov: bool = False, full_output_cov: bool = False):
         """Mean and variance of new observations: :meth:`predict_f` plus each output's
         noise variance (that of a new transition, factor 1), on the diagonal when
