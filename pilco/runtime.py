@@ -23,7 +23,8 @@ import tempfile
 from typing import Dict, Iterator, List, Mapping, Optional, Union
 
 __all__ = ["TF_LOG_LEVEL", "THREAD_VARIABLES", "quiet_tensorflow", "log_level",
-           "configure_logging", "limit_blas_threads", "configure_threads",
+           "configure_logging", "limit_blas_threads", "reproducible_arithmetic",
+           "configure_threads",
            "thread_environment", "XLA_CACHE_VARIABLE",
            "xla_cache_directory", "use_xla_cache"]
 
@@ -266,9 +267,33 @@ def limit_blas_threads() -> None:
     threadpool_limits(limits=1, user_api="blas")
 
 
+def reproducible_arithmetic() -> None:
+    """Turn off Grappler's arithmetic optimizer (``tf.config.optimizer``) for the functions
+    this process traces from now on, so that a compiled function gives the same bits in
+    every process.
+
+    With it on, the policy objective's gradient (a ``tf.while_loop`` over the horizon)
+    depends on how TensorFlow's executor happens to schedule the loop's operations: the
+    same objective on the same inputs gives a gradient differing in the last bits in some
+    evaluations, mostly the first ones of a process, whether the inter-op pool has one
+    thread or several, with oneDNN on or off and with TensorFlow's op determinism; a run
+    then takes another path from one process to the next. With it off the value and
+    gradient are the same in every process, with one inter-op thread (a sweep's run) or
+    several (a run alone), on both oneDNN paths, at the same speed (docs/success-rates.md,
+    "Runs that part"). Without the optimizer's rewrites (additions regrouped, common
+    factors hoisted) each operation runs as written. Affects the whole process
+    (TensorFlow has one such setting); imports TensorFlow.
+    """
+    import tensorflow as tf
+
+    tf.config.optimizer.set_experimental_options({"arithmetic_optimization": False})
+
+
 def configure_threads(threads: Optional[int] = None) -> None:
     """Size this process's TensorFlow thread pools, and the BLAS libraries' to one thread
-    (:func:`limit_blas_threads`), so that a seed gives the same run alone and in a sweep.
+    (:func:`limit_blas_threads`), and make its compiled functions' arithmetic independent
+    of scheduling (:func:`reproducible_arithmetic`), so that a seed gives the same run
+    alone and in a sweep, in every process.
 
     ``None`` (a task's process): one intra-op thread unless ``TF_NUM_INTRAOP_THREADS``
     says otherwise (the inter-op pool keeps its default, every CPU): the policy
@@ -284,9 +309,11 @@ def configure_threads(threads: Optional[int] = None) -> None:
     if threads is None:
         os.environ.setdefault("TF_NUM_INTRAOP_THREADS", "1")
         limit_blas_threads()
+        reproducible_arithmetic()
         return
     threads = _positive(threads)
     limit_blas_threads()
+    reproducible_arithmetic()
     import tensorflow as tf
 
     tf.config.threading.set_intra_op_parallelism_threads(threads)
