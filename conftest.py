@@ -11,6 +11,8 @@ this run ignores those outputs and discards its own. This file
   executes them with their full settings), and MuJoCo's headless EGL backend on Linux
   unless ``MUJOCO_GL`` is set. Kernels inherit this process's environment, so it is set
   here, at import, before any kernel starts;
+* turns TensorFlow's arithmetic optimizer off, as every run does
+  (:func:`pilco.runtime.reproducible_arithmetic`);
 * compiles XLA programs (``tests/test_xla.py``) without LLVM's optimisations
   (``XLA_FLAGS=--xla_backend_optimization_level=0`` unless ``XLA_FLAGS`` is set): the
   tests check values, not speed, and compile in half the time;
@@ -132,3 +134,14 @@ def pytest_runtest_makereport(item, call):
                 isinstance(exc, pytest.fail.Exception) and "pytest-timeout" in str(exc)):
             report.longrepr = f"{item.path.name}: {exc}"
     return report
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _reproducible_arithmetic():
+    """Tests compute as runs do: every run's process turns Grappler's arithmetic optimizer
+    off (``pilco.runtime.configure_threads``, which ``Task.parse`` calls in a test's
+    process too). Set once per worker before its first test, a test's result does not
+    depend on which tests its worker ran before it."""
+    from pilco.runtime import reproducible_arithmetic
+
+    reproducible_arithmetic()

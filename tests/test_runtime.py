@@ -240,8 +240,12 @@ def test_configure_logging_sets_the_root_or_one_logger():
 
 # ----------------------------------------------------------------------------- threads
 def test_configure_threads_sets_one_intra_op_thread_unless_told(monkeypatch):
+    # the arithmetic switch is process-wide: recorded here, checked in its own process below
+    calls = []
+    monkeypatch.setattr(runtime, "reproducible_arithmetic", lambda: calls.append(1))
     monkeypatch.delenv("TF_NUM_INTRAOP_THREADS", raising=False)
     runtime.configure_threads()
+    assert calls == [1]
     assert os.environ["TF_NUM_INTRAOP_THREADS"] == "1"
     monkeypatch.setenv("TF_NUM_INTRAOP_THREADS", "4")
     runtime.configure_threads()
@@ -251,7 +255,21 @@ def test_configure_threads_sets_one_intra_op_thread_unless_told(monkeypatch):
             runtime.configure_threads(bad)
 
 
-def test_configure_threads_leaves_the_blas_libraries_one_thread():
+def test_configure_threads_turns_off_the_arithmetic_optimizer_for_every_function():
+    done = run_python("""
+        import tensorflow as tf
+        before = tf.config.optimizer.get_experimental_options().get("arithmetic_optimization")
+        from pilco.runtime import configure_threads
+        configure_threads()
+        after = tf.config.optimizer.get_experimental_options()["arithmetic_optimization"]
+        print(before, after)
+        """)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.split() == ["None", "False"]
+
+
+def test_configure_threads_leaves_the_blas_libraries_one_thread(monkeypatch):
+    monkeypatch.setattr(runtime, "reproducible_arithmetic", lambda: None)
     threadpoolctl = pytest.importorskip("threadpoolctl")
     import numpy  # noqa: F401 - loads its BLAS
 

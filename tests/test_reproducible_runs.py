@@ -1,0 +1,56 @@
+"""A seed names one run: the same short cart-pole run in two processes, one with a run's
+own thread settings (``pilco run`` alone: TensorFlow's inter-op pool on every CPU) and one
+with a sweep's (:func:`pilco.runtime.thread_environment`, one thread), gives the same
+distance at every step of every episode.
+
+Before the runs turned off Grappler's arithmetic optimizer
+(:func:`pilco.runtime.reproducible_arithmetic`) this command gave 4 different results in 10
+processes with the same settings; the comparison here is bitwise.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pilco.runtime import THREAD_VARIABLES, thread_environment
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SHORT_RUN = ["cartpole", "--seed", "2", "--episodes", "3", "--horizon", "20",
+             "--basis-functions", "5", "--policy-iters", "8", "--model-iters", "30",
+             "--quiet", "--no-render", "--no-figures"]
+
+
+def _start(output: Path, env: dict) -> subprocess.Popen:
+    env = dict(env)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
+    return subprocess.Popen([sys.executable, "-m", "pilco.tasks", *SHORT_RUN,
+                             "--output", str(output)], env=env, cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _alone_environment() -> dict:
+    """This process's environment without any thread variable: a user's shell."""
+    return {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
+
+
+def test_a_run_alone_and_the_same_run_in_a_sweeps_process_are_identical(tmp_path):
+    alone = _alone_environment()
+    swept = thread_environment(1, alone)
+    assert swept["TF_NUM_INTEROP_THREADS"] == "1" and "TF_NUM_INTEROP_THREADS" not in alone
+    runs = {"alone": _start(tmp_path / "alone", alone),
+            "sweep": _start(tmp_path / "sweep", swept)}
+    summaries = {}
+    for name, process in runs.items():
+        output, _ = process.communicate(timeout=600)
+        assert process.returncode == 0, output[-3000:]
+        summaries[name] = json.loads((tmp_path / name / "summary.json").read_text())
+    a, b = summaries["alone"]["distances"], summaries["sweep"]["distances"]
+    assert len(a) == len(b) == 3 and all(len(x) == 21 for x in a)
+    for episode, (x, y) in enumerate(zip(a, b)):
+        assert x == y, f"episode {episode + 1} parted: {max(abs(p - q) for p, q in zip(x, y))} m"
