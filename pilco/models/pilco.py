@@ -30,6 +30,7 @@ import numpy as np
 import tensorflow as tf
 from check_shapes import check_shapes
 
+from ..runtime import reproducible_arithmetic
 from ..seeding import generator
 from ..validation import (
     check_bool,
@@ -121,6 +122,11 @@ class PILCO(gpflow.base.Module):
 
     See :class:`pilco.models.layout.StateLayout` for the index sets. Bad indices or
     starts raise ValueError naming the problem, before TensorFlow sees them.
+
+    Building an agent turns TensorFlow's Grappler arithmetic optimizer off for the
+    process (:func:`pilco.runtime.reproducible_arithmetic`): with it on, the policy
+    objective's gradient depends on the executor's scheduling, so the same agent gave
+    other bits in another process.
     """
 
     def __init__(self, data, controller, reward, horizon: int = 30, m_init=None, S_init=None,
@@ -130,6 +136,7 @@ class PILCO(gpflow.base.Module):
                  dynamics_indices: Optional[Sequence[int]] = None,
                  policy_indices: Optional[Sequence[int]] = None):
         super().__init__(name=name)
+        reproducible_arithmetic()
         X, Y = check_transitions(data, "data")
         self.state_dim = D = Y.shape[1]
         self.control_dim = U = X.shape[1] - D
