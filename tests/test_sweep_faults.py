@@ -427,13 +427,15 @@ def test_a_corrupt_summary_is_run_again_not_counted(faulty_sweep, tmp_path):
 
 # ------------------------------------------------------------- the driver interrupted
 def interrupted(out):
-    """A sweep of two settings: 5-step episodes (a quick run) and 1000-step ones (about
-    three seconds an episode; :data:`EPISODES` of them leave the driver time to be
-    signalled while the slow run is under way, also on a busy machine)."""
-    return ["cartpole", "--seeds", "0", "--grid", "horizon=5,1000", "--output", str(out),
+    """A sweep of two settings: 5-step episodes (a quick run) and 4000-step ones (about
+    ten seconds an episode; :data:`EPISODES` of them leave the driver time to be
+    signalled while the slow run is under way, also while the second sweep of
+    :func:`interrupt` starts on a busy machine: with 1000-step episodes the slow run
+    sometimes finished first)."""
+    return ["cartpole", "--seeds", "0", "--grid", "horizon=5,4000", "--output", str(out),
             "--no-progress", "--no-figures", "--max-retries", "0", "--", "--episodes",
             str(EPISODES), "--random-episodes", str(EPISODES)]
-QUICK, SLOW = "horizon=5", "horizon=1000"
+QUICK, SLOW = "horizon=5", "horizon=4000"
 EPISODES = 5
 
 
