@@ -23,7 +23,8 @@ import tempfile
 from typing import Dict, Iterator, List, Mapping, Optional, Union
 
 __all__ = ["TF_LOG_LEVEL", "THREAD_VARIABLES", "quiet_tensorflow", "log_level",
-           "configure_logging", "limit_blas_threads", "reproducible_arithmetic",
+           "configure_logging", "limit_blas_threads", "ARITHMETIC_OPTIMIZER_VARIABLE",
+           "reproducible_arithmetic",
            "configure_threads",
            "thread_environment", "XLA_CACHE_VARIABLE",
            "xla_cache_directory", "use_xla_cache"]
@@ -35,6 +36,10 @@ TF_LOG_LEVEL = "2"
 #: environment variables that size TensorFlow's and the BLAS libraries' thread pools
 THREAD_VARIABLES = ("TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS", "OMP_NUM_THREADS",
                     "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+#: environment variable that, set to ``1``, leaves Grappler's arithmetic optimizer on
+#: (:func:`reproducible_arithmetic`)
+ARITHMETIC_OPTIMIZER_VARIABLE = "PILCO_ARITHMETIC_OPTIMIZER"
 
 #: environment variable naming the folder of XLA's persistent compilation cache (a sweep
 #: sets it to a folder in its output directory, shared by its runs)
@@ -283,7 +288,13 @@ def reproducible_arithmetic() -> None:
     "Runs that part"). Without the optimizer's rewrites (additions regrouped, common
     factors hoisted) each operation runs as written. Affects the whole process
     (TensorFlow has one such setting); imports TensorFlow.
+
+    ``PILCO_ARITHMETIC_OPTIMIZER=1`` in the environment leaves the optimizer on (runs
+    then round as before this switch, and part between processes), e.g. to compare the
+    two arithmetics' success rates in a sweep, whose runs inherit the variable.
     """
+    if os.environ.get(ARITHMETIC_OPTIMIZER_VARIABLE, "") == "1":
+        return
     import tensorflow as tf
 
     tf.config.optimizer.set_experimental_options({"arithmetic_optimization": False})

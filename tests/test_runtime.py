@@ -266,6 +266,14 @@ def test_configure_threads_turns_off_the_arithmetic_optimizer_for_every_function
         """)
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout.split() == ["None", "False"]
+    kept = run_python("""
+        import tensorflow as tf
+        from pilco.runtime import configure_threads
+        configure_threads()
+        print(tf.config.optimizer.get_experimental_options().get("arithmetic_optimization"))
+        """, env_extra={runtime.ARITHMETIC_OPTIMIZER_VARIABLE: "1"})
+    assert kept.returncode == 0, kept.stderr[-3000:]
+    assert kept.stdout.split() == ["None"]
 
 
 def test_configure_threads_leaves_the_blas_libraries_one_thread(monkeypatch):
