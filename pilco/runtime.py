@@ -319,12 +319,12 @@ def configure_threads(threads: Optional[int] = None) -> None:
     """
     if threads is None:
         os.environ.setdefault("TF_NUM_INTRAOP_THREADS", "1")
-        limit_blas_threads()
-        reproducible_arithmetic()
-        return
-    threads = _positive(threads)
+    else:
+        threads = _positive(threads)
     limit_blas_threads()
     reproducible_arithmetic()
+    if threads is None:
+        return
     import tensorflow as tf
 
     tf.config.threading.set_intra_op_parallelism_threads(threads)
