@@ -13,7 +13,7 @@ from gpflow.config import default_float
 
 from .features import non_angle_indices
 
-__all__ = ["trig_moments", "augment_state"]
+__all__ = ["trig_moments", "augment_state", "point_features"]
 
 
 def _as_float(x) -> tf.Tensor:
@@ -102,3 +102,23 @@ def augment_state(m, s, angle_indices: Sequence[int]):
         axis=0,
     )
     return Mf, Sf, Cf
+
+
+def point_features(x, angle_indices: Sequence[int]):
+    """The features ``[x_other, sin θ1, cos θ1, ...]`` of P known states, as tensors (what
+    :func:`augment_state` returns as the mean for a zero covariance, and
+    :func:`pilco.features.angle_features` with NumPy). Shapes: x [P, D] -> [P, F]."""
+    x = _as_float(x)
+    D = x.shape[-1]
+    ang = list(angle_indices)
+    if not ang:
+        return x
+    keep = tf.constant(np.eye(D)[:, non_angle_indices(D, ang)], dtype=x.dtype)  # [D, K]
+    pick = tf.constant(np.eye(D)[:, ang], dtype=x.dtype)  # [D, I]
+    theta = tf.matmul(x, pick)  # [P, I]
+    trig = tf.concat([tf.sin(theta), tf.cos(theta)], axis=1)  # blocks [sin..., cos...]
+    I = len(ang)
+    if I > 1:
+        order = np.stack([np.arange(I), I + np.arange(I)], axis=1).reshape(-1)
+        trig = tf.matmul(trig, tf.constant(np.eye(2 * I)[:, order], dtype=x.dtype))
+    return tf.concat([tf.matmul(x, keep), trig], axis=1)

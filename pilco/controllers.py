@@ -112,6 +112,18 @@ def squash_sat(m, s, max_action=None):
     return M, S, C
 
 
+def _squash_sin_points(v, e):
+    return e * tf.sin(v)
+
+
+def _squash_sat_points(v, e):
+    return e * (9.0 * tf.sin(v) + tf.sin(3.0 * v)) / 8.0
+
+
+#: the squashing functions at known actions (no uncertainty): v [P, U], e [1, U] -> [P, U]
+_POINT_SQUASH = {squash_sin: _squash_sin_points, squash_sat: _squash_sat_points}
+
+
 def _check_state_gaussian(controller, arguments) -> None:
     arguments["m"], arguments["s"] = check_gaussian(arguments["m"], arguments["s"],
                                                     controller.state_dim, "state")
@@ -148,6 +160,27 @@ class _SquashedController(gpflow.base.Module):
             V = tf.matmul(V, C)
         return M, S, V
 
+    def _unsquashed_points(self, x, prepared):
+        """Unsquashed actions at P known inputs: x [P, D] -> [P, U]."""
+        raise NotImplementedError
+
+    @check_shapes("x: [P, D]", "return: [P, U]")
+    def point_actions(self, x, prepared=None):
+        """Actions at P known (policy) inputs, as tensors: x [P, D] -> [P, U]; the mean
+        :meth:`moments` returns for a zero covariance, for many inputs at once.
+        ``prepared`` is :meth:`prepare`'s result, computed here when None."""
+        v = self._unsquashed_points(x, self.prepare() if prepared is None else prepared)
+        if self.squash is None:
+            return v
+        U = self.control_dim
+        e = _max_action_vector(self.max_action, U, v.dtype)
+        at_points = _POINT_SQUASH.get(self.squash)
+        if at_points is not None:
+            return at_points(v, e[None, :])
+        zero = tf.zeros([U, U], v.dtype)  # another squash: its moments row by row
+        return tf.concat([self.squash(v[i:i + 1], zero, self.max_action)[0]
+                          for i in range(int(v.shape[0]))], axis=0)
+
     @checked_arguments(_check_state_gaussian)
     @_ACTION_MOMENTS_SHAPES
     def compute_action(self, m, s, squash: bool = True):
@@ -174,6 +207,9 @@ class LinearController(_SquashedController):
         M = tf.matmul(m, W, transpose_b=True) + self.b
         S = tf.matmul(W, tf.matmul(s, W, transpose_b=True))
         return M, S, tf.transpose(W)
+
+    def _unsquashed_points(self, x, prepared):
+        return tf.matmul(x, self.W, transpose_b=True) + self.b
 
     def randomize(self, scale: float = 0.1, seed: Optional[int] = None):
         """Draw fresh parameters: W, b ~ N(0, scale^2)."""
@@ -251,6 +287,9 @@ class RbfController(_SquashedController):
 
     def _unsquashed(self, m, s, prepared: gp_moments.Predictor):
         return gp_moments.predict(m, s, prepared)
+
+    def _unsquashed_points(self, x, prepared: gp_moments.Predictor):
+        return gp_moments.point_means(x, prepared)
 
     def place_near(self, mean, std: float, seed: Optional[int] = None,
                    features: Optional[Callable[[np.ndarray], np.ndarray]] = None,

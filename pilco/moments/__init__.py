@@ -17,7 +17,8 @@ module             job
                    indices, weights, the fused block with its hand-made gradient,
                    and :func:`pair_groups`, the parts that run side by side
 ``prediction``     :func:`prepare` (a :class:`Predictor`), :func:`predict` at one
-                   Gaussian input, :func:`moment_match` (both in one call)
+                   Gaussian input, :func:`moment_match` (both in one call),
+                   :func:`point_means` at many known inputs
 ``compiled``       what XLA needs: log-determinants without ``slogdet``
                    (:func:`xla_compatible`), factorisations padded to fixed sizes
                    (:func:`pad_factorization`, :func:`bucket_size`)
@@ -28,7 +29,7 @@ The public names below are importable from :mod:`pilco.moments` itself.
 from .compiled import bucket_size, pad_factorization, xla_compatible
 from .factorization import Factorization, factorize, fitc_factorize, se_kernel
 from .pairs import MAX_PAIR_GROUPS, pair_groups, pair_weights, symmetric_pairs
-from .prediction import Predictor, eye_like, moment_match, predict, prepare
+from .prediction import Predictor, eye_like, moment_match, point_means, predict, prepare
 
 __all__ = [
     "Factorization",
@@ -44,6 +45,7 @@ __all__ = [
     "pair_groups",
     "MAX_PAIR_GROUPS",
     "moment_match",
+    "point_means",
     "xla_compatible",
     "pad_factorization",
     "bucket_size",

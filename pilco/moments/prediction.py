@@ -199,6 +199,19 @@ def predict(m: tf.Tensor, s: tf.Tensor, pred: Predictor, deterministic_jitter: f
     return M, S, tf.transpose(V)
 
 
+def point_means(x: tf.Tensor, pred: Predictor) -> tf.Tensor:
+    """Predictive means of the E GP outputs at P known inputs (no input uncertainty).
+
+    Shapes: x [P, D] -> [P, E]. ``sum_k beta_ik sf_i^2 exp(-|(x - c_k) / l_i|^2 / 2)``:
+    what :func:`predict` returns as ``M`` for a zero input covariance, for many inputs at
+    once at the cost of one kernel row per input and output.
+    """
+    scaled = x[:, None, :] * pred.inv_lengthscales[None, :, :]  # [P, E, D]
+    diff = pred.scaled_centers[None, :, :, :] - scaled[:, :, :, None]  # [P, E, D, n]
+    k = tf.exp(-0.5 * tf.reduce_sum(tf.square(diff), axis=2))  # [P, E, n]
+    return pred.signal_variance[None, :] * tf.reduce_sum(k * pred.beta[None, :, :], axis=-1)
+
+
 def moment_match(
     m: tf.Tensor,
     s: tf.Tensor,
