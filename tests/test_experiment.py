@@ -508,6 +508,57 @@ def test_a_fragile_policy_is_searched_again_on_the_start_mixture(tmp_path, gap, 
         config(policy_start_mixture_when="sometimes")
 
 
+class WideStartAgent(StandInAgent):
+    """A stand-in agent with start points and a wide start: records what each policy
+    search ran with."""
+
+    def __init__(self, data, **kw):
+        super().__init__(data, **kw)
+        self.S_init = np.array([[0.04]])
+        self.start_points = None
+        self.start_scale = None
+        self.seen = []  # (start points, start scale) of each policy search
+
+    def optimize_policy(self, maxiter, restarts, seed, callback, method, min_rel_improvement,
+                        patience):
+        self.seen.append((self.start_points, self.start_scale))
+        return super().optimize_policy(maxiter, restarts, seed, callback, method,
+                                       min_rel_improvement, patience)
+
+
+@pytest.mark.parametrize("when", ["solved", "always"])
+def test_start_points_and_wide_start_are_switched_on_once_solved(tmp_path, when):
+    """The flank points, samples and wide start of the config reach the agent's policy
+    searches from the first one after a solved episode (``"solved"``) or from the first
+    (``"always"``); the samples are drawn again in every episode."""
+    exp, _ = experiment(tmp_path, config(policy_flank_points=1.5, policy_start_samples=3,
+                                         policy_start_scale=2.0,
+                                         policy_start_points_when=when))
+    agents = []
+
+    def build(data, start_states):  # noqa: ARG001
+        agents.append(WideStartAgent(data))
+        return agents[-1]
+
+    exp.build_agent = build
+    exp.run_random_episode()
+    agent = agents[0]
+    agent.gain = 0.6
+    exp.run_learned_episode()  # solves
+    exp.run_learned_episode()
+    exp.run_learned_episode()
+    (p1, s1), (p2, s2), (p3, s3) = agent.seen
+    if when == "solved":
+        assert p1 is None and s1 is None
+    else:
+        assert p1.shape == (1, 2 + 3, 1) and s1 == 2.0
+    assert s2 == s3 == 2.0
+    assert p2.shape == p3.shape == (1, 2 + 3, 1)
+    np.testing.assert_allclose(p2[0, :2, 0], [0.3, -0.3])  # 1.5 standard deviations out
+    np.testing.assert_array_equal(p2[0, :2], p3[0, :2])  # the flank points stay
+    assert not np.array_equal(p2[0, 2:], p3[0, 2:])  # the samples are drawn again
+
+
 def test_a_watch_sees_the_states_and_its_pause_counts_as_policy_time(tmp_path):
     """``run_learned_episode(watch=...)``: the watch wraps the agent's policy for that
     episode only, sees every state as it comes, and the seconds it notes as a pause move

@@ -62,6 +62,19 @@ class ExperimentConfig:
             return above the mixture's by more than ``policy_fragile_gap``.
         policy_fragile_gap: the gap (in reward, i.e. steps at full cost) between the
             plain and the mixture's expected return above which a policy is fragile.
+        policy_flank_points: the spread of the policy objective's flank points (known
+            start states, :attr:`pilco.models.PILCO.start_points`, from
+            :func:`pilco.models.starts.flank_points`; ``None`` or 0: none).
+        policy_start_samples: the number of known start states drawn from the start
+            distribution for the policy objective (:func:`pilco.models.starts.start_samples`,
+            drawn again in every episode; 0: none).
+        policy_start_scale: a wide start beside the start distribution, this many times
+            its standard deviations (:attr:`pilco.models.PILCO.start_scale`; ``None`` or 0:
+            none).
+        policy_start_points_when: ``"always"``; ``"solved"``: the start points and the wide
+            start are used
+            only once an episode has been solved (the plain objective learns the task;
+            the points keep the policy working from the whole start distribution).
         cost_width: width of the saturating cost of the distance (summary ``cost``).
         success_threshold: distance [m] counted as "at the target".
         solved_rule: ``"reach"``: an episode is solved when any state is within the
@@ -102,6 +115,10 @@ class ExperimentConfig:
     policy_start_mixture: Optional[float] = None
     policy_start_mixture_when: str = "solved"
     policy_fragile_gap: float = 1.0
+    policy_flank_points: Optional[float] = None
+    policy_start_samples: int = 0
+    policy_start_scale: Optional[float] = None
+    policy_start_points_when: str = "solved"
     cost_width: float = 0.25
     success_threshold: float = 0.05
     solved_rule: str = "reach"
@@ -128,6 +145,7 @@ class ExperimentConfig:
         for name, (a, b) in (("policy_early_stop", ("always", "solved")),
                              ("policy_restart_when", ("always", "unsolved")),
                              ("policy_warm_start", ("always", "solved")),
+                             ("policy_start_points_when", ("always", "solved")),
                              ("solved_rule", ("reach", "hold")),
                              ("policy_compiler", ("graph", "xla"))):
             value = getattr(self, name)
@@ -154,6 +172,18 @@ class ExperimentConfig:
                 or self.policy_start_mixture < 0):
             raise ValueError(f"policy_start_mixture must be a number >= 0 or None, got "
                              f"{self.policy_start_mixture!r}")
+        for name in ("policy_flank_points", "policy_start_scale"):
+            value = getattr(self, name)
+            if value == 0:
+                setattr(self, name, None)
+            elif value is not None and (isinstance(value, bool)
+                                        or not isinstance(value, (int, float)) or value < 0):
+                raise ValueError(f"{name} must be a number >= 0 or None, got {value!r}")
+        if (isinstance(self.policy_start_samples, bool)
+                or not isinstance(self.policy_start_samples, int)
+                or self.policy_start_samples < 0):
+            raise ValueError(f"policy_start_samples must be a whole number >= 0, got "
+                             f"{self.policy_start_samples!r}")
         if self.max_data == 0:
             self.max_data = None
         if self.max_data is not None and self.max_data < 2:
@@ -186,6 +216,16 @@ class ExperimentConfig:
         when = self.policy_start_mixture_when
         if when == "always" or (when == "solved" and solved):
             return self.policy_start_mixture
+        return None
+
+    def start_points_at(self, solved: bool):
+        """The policy objective's start points and wide start in a search, given whether
+        an earlier episode was solved: ``(spread of the flank points or None, number of
+        samples, start scale or None)``, or None when there are none."""
+        wanted = (self.policy_flank_points is not None or self.policy_start_samples > 0
+                  or self.policy_start_scale is not None)
+        if wanted and (self.policy_start_points_when == "always" or solved):
+            return self.policy_flank_points, self.policy_start_samples, self.policy_start_scale
         return None
 
     def fragile_check_at(self, solved: bool) -> Optional[float]:

@@ -7,6 +7,7 @@ from typing import Dict
 
 import numpy as np
 
+from ..models.starts import flank_points, start_samples
 from .episode import Episode
 from .progress import optimizer_callback, progress_bar
 
@@ -44,8 +45,9 @@ def improve_policy(exp, number: int) -> float:
     restarts as :meth:`ExperimentConfig.policy_early_stop_at` (always, or with
     ``policy_early_stop="solved"`` once an episode was solved) and
     :meth:`ExperimentConfig.policy_restarts_at` say (from episode ``policy_restart_from``
-    on; with ``policy_restart_when="unsolved"`` until an episode was solved), and the
-    start mixture as :meth:`ExperimentConfig.start_mixture_at` says.
+    on; with ``policy_restart_when="unsolved"`` until an episode was solved), the
+    start mixture as :meth:`ExperimentConfig.start_mixture_at` says and the start points
+    as :meth:`ExperimentConfig.start_points_at` says.
     The search starts from the agent's current policy (see :func:`learn_policy`).
     Returns the predicted return."""
     cfg, agent = exp.config, exp.agent
@@ -54,6 +56,13 @@ def improve_policy(exp, number: int) -> float:
     spread = cfg.start_mixture_at(solved)
     if spread is not None or getattr(agent, "start_spread", None) is not None:
         agent.start_spread = spread
+    wanted = cfg.start_points_at(solved)
+    points = _start_points(agent, wanted, exp.episode_seed(number))
+    if points is not None or getattr(agent, "start_points", None) is not None:
+        agent.start_points = points
+    scale = None if wanted is None else wanted[2]
+    if scale is not None or getattr(agent, "start_scale", None) is not None:
+        agent.start_scale = scale
     exp.policy_notes = {}
     if exp.before_policy_search is not None:
         exp.before_policy_search(agent, number)
@@ -68,6 +77,26 @@ def improve_policy(exp, number: int) -> float:
     logger.info("episode %d: predicted return %.3f over %d steps", number, expected,
                 agent.horizon)
     return expected
+
+
+def _start_points(agent, wanted, seed: int):
+    """The policy objective's start points [T, P, D] for ``wanted`` (``(spread, samples,
+    scale)`` of :meth:`ExperimentConfig.start_points_at`, or None): each task's flank
+    points and its samples, drawn from the generator of ``seed`` (one per task); None
+    when there are none."""
+    if wanted is None or (wanted[0] is None and not wanted[1]):
+        return None
+    spread, samples = wanted[:2]
+    m0, S0 = np.asarray(agent.m_init), np.asarray(agent.S_init)
+    if S0.ndim == 2:
+        S0 = np.broadcast_to(S0, (len(m0),) + S0.shape)
+    tasks = []
+    for i, (m, S) in enumerate(zip(m0, S0)):
+        parts = [] if spread is None else [flank_points(m, S, spread)]
+        if samples:
+            parts.append(start_samples(m, S, samples, seed + i))
+        tasks.append(np.concatenate(parts))
+    return np.stack(tasks)
 
 
 def search_policy(exp, number: int, what: str = "policy", runs: int = 1) -> float:

@@ -52,7 +52,7 @@ from .mgpr import MGPR
 from .policy_search import GuardedScipy, search_policy
 from .rollout import Rollout
 from .smgpr import SMGPR
-from .starts import check_spread, check_starts, check_task
+from .starts import check_spread, check_start_points, check_starts, check_task
 from .transitions import Transitions
 
 __all__ = ["PILCO", "POLICY_METHODS"]
@@ -171,6 +171,8 @@ class PILCO(gpflow.base.Module):
         self._xla_optimizer = GuardedScipy()
         self._mixture_optimizer = GuardedScipy()  # the start mixture's objective
         self._xla_mixture_optimizer = GuardedScipy()
+        self._points_optimizer = GuardedScipy()  # the objective with start points
+        self._xla_points_optimizer = GuardedScipy()
 
     def _check_controller(self, controller):
         """``controller`` follows the protocol, reads the policy's features and returns U
@@ -226,6 +228,7 @@ class PILCO(gpflow.base.Module):
             # their traces have the horizon as a constant
             self._xla_optimizer = GuardedScipy()
             self._xla_mixture_optimizer = GuardedScipy()
+            self._xla_points_optimizer = GuardedScipy()
 
     @property
     def m_init(self) -> np.ndarray:
@@ -289,6 +292,42 @@ class PILCO(gpflow.base.Module):
     @start_spread.setter
     def start_spread(self, value) -> None:
         self._rollout.set_start_mixture(check_spread(value, self.state_dim))
+
+    @property
+    def start_points(self) -> Optional[np.ndarray]:
+        """Known start states of the policy objective, [T, P, D], or None (the MATLAB
+        objective). Each task's P points are rolled out through the policy and the
+        model's mean dynamics (no uncertainty), and the task's total becomes the mean of
+        the expected return of its start distribution, propagated as one moment-matched
+        Gaussian, and the points' mean return (and the wide start's, :attr:`start_scale`,
+        when set). Points on the flanks of the
+        start distribution (:func:`pilco.models.starts.flank_points`) or drawn from it
+        (:func:`pilco.models.starts.start_samples`) show the objective a policy that fails
+        from part of the start distribution, which the one Gaussian averages away, at a
+        fraction of its cost (one kernel row per point and step). Set [P, D] for one
+        task, [T, P, D] for several; None switches them off. Ignored while a start
+        mixture is set (:attr:`start_spread`)."""
+        return self._rollout.start_points
+
+    @start_points.setter
+    def start_points(self, value) -> None:
+        if self._rollout.set_start_points(
+                check_start_points(value, self._rollout.num_tasks, self.state_dim)):
+            self._drop_compiled()  # its compiled objective has the number of points
+
+    @property
+    def start_scale(self) -> Optional[float]:
+        """A wide start beside the start distribution: None, or ``k``: each task's total
+        becomes the mean of the expected returns from ``N(m, S)`` and from
+        ``N(m, k² S)`` (and of its start points', :attr:`start_points`, when set), both
+        moment-matched Gaussians, so that the objective sees what happens from the start
+        distribution's flanks with the model's uncertainty there, at twice the cost.
+        Ignored while a start mixture is set. Setting 0 or None switches it off."""
+        return self._rollout.start_scale
+
+    @start_scale.setter
+    def start_scale(self, value) -> None:
+        self._rollout.set_start_scale(check_spread(value, self.state_dim, "start scale"))
 
     @property
     def context_indices(self):
@@ -520,13 +559,20 @@ class PILCO(gpflow.base.Module):
                              f"method; {type(self.controller).__name__} has none")
         jit_compile = check_bool(jit_compile, "jit_compile")
         self._rollout.refresh(self.mgpr, pad=jit_compile)
-        ro, mixture = self._rollout, self.start_spread is not None
+        ro = self._rollout
+        objective = ("mixture" if self.start_spread is not None
+                     else "points" if (self.start_points is not None
+                                       or self.start_scale is not None) else "plain")
         if jit_compile:
-            loss, optimizer = ((ro.xla_mixture_policy_loss, self._xla_mixture_optimizer)
-                               if mixture else (ro.xla_policy_loss, self._xla_optimizer))
+            loss, optimizer = {
+                "mixture": (ro.xla_mixture_policy_loss, self._xla_mixture_optimizer),
+                "points": (ro.xla_points_policy_loss, self._xla_points_optimizer),
+                "plain": (ro.xla_policy_loss, self._xla_optimizer)}[objective]
         else:
-            loss, optimizer = ((ro.mixture_policy_loss, self._mixture_optimizer)
-                               if mixture else (ro.plain_policy_loss, self._policy_optimizer))
+            loss, optimizer = {
+                "mixture": (ro.mixture_policy_loss, self._mixture_optimizer),
+                "points": (ro.points_policy_loss, self._points_optimizer),
+                "plain": (ro.plain_policy_loss, self._policy_optimizer)}[objective]
         self._last_search = optimizer
         return search_policy(loss, self.controller, optimizer, maxiter, restarts, rng, method,
                              callback, min_rel_improvement, patience, jit_compile=jit_compile)

@@ -14,7 +14,8 @@ import numpy as np
 
 from ..validation import check_covariance, check_gaussian
 
-__all__ = ["check_starts", "check_task", "start_mixture", "check_spread"]
+__all__ = ["check_starts", "check_task", "start_mixture", "flank_points", "start_samples",
+           "check_spread", "check_start_points"]
 
 
 def _numpy(x):
@@ -89,20 +90,26 @@ def check_task(task, num_tasks: int) -> int:
     return int(task)
 
 
-def check_spread(spread, state_dim: int):
-    """``None`` or 0 (no mixture), else a float ``0 < spread < sqrt(D + 1/2)`` (the
-    components' covariance ``(1 - 2 spread² / (2D + 1)) S`` must stay positive)."""
+def check_spread(spread, state_dim: int, what: str = "start mixture spread"):
+    """``None`` or 0 (off), else a float ``0 < spread < sqrt(D + 1/2)`` for a start mixture
+    (the components' covariance ``(1 - 2 spread² / (2D + 1)) S`` must stay positive), any
+    finite number > 0 for anything else ``what`` names (flank points, a start scale)."""
     if spread is None:
         return None
     if isinstance(spread, (bool, np.bool_)) or not isinstance(spread, (int, float, np.number)):
-        raise TypeError(f"start mixture spread must be a number or None, got {spread!r}")
+        raise TypeError(f"{what} must be a number or None, got {spread!r}")
     spread = float(spread)
     if spread == 0.0:
         return None
-    limit = float(np.sqrt(state_dim + 0.5))
-    if not 0.0 < spread < limit:
-        raise ValueError(f"start mixture spread must be in (0, {limit:.3f}) for a {state_dim}-"
-                         f"dimensional state (0 or None: no mixture), got {spread}")
+    if what == "start mixture spread":
+        limit = float(np.sqrt(state_dim + 0.5))
+        if not 0.0 < spread < limit:
+            raise ValueError(f"start mixture spread must be in (0, {limit:.3f}) for a "
+                             f"{state_dim}-dimensional state (0 or None: no mixture), got "
+                             f"{spread}")
+    elif not (spread > 0.0 and np.isfinite(spread)):
+        raise ValueError(f"{what} must be a finite number > 0 (0 or None: none), got "
+                         f"{spread}")
     return spread
 
 
@@ -126,8 +133,53 @@ def start_mixture(m, S, spread: float) -> Tuple[np.ndarray, np.ndarray]:
     spread = check_spread(spread, D)
     if spread is None:
         return m[None], S
+    c = 1.0 - 2.0 * spread ** 2 / (2 * D + 1)
+    return np.concatenate([m[None], flank_points(m, S, spread)]), c * S
+
+
+def flank_points(m, S, spread: float) -> np.ndarray:
+    """The 2D states ``m ± spread * sqrt(λ_i) v_i`` along the eigenvectors ``v_i`` of
+    ``S`` (eigenvalues ``λ_i``): ``spread`` standard deviations out along each principal
+    axis of ``N(m, S)``, in the order ``+v_1, -v_1, +v_2, ...``.
+
+    Shapes: m [D], S [D, D], spread > 0 -> [2D, D].
+    """
+    m = np.asarray(m, dtype=np.float64).reshape(-1)
+    S = np.asarray(S, dtype=np.float64)
     lam, V = np.linalg.eigh(0.5 * (S + S.T))
     steps = spread * np.sqrt(np.clip(lam, 0.0, None))[None, :] * V  # column i: step along v_i
-    means = [m] + [m + sign * steps[:, i] for i in range(D) for sign in (1.0, -1.0)]
-    c = 1.0 - 2.0 * spread ** 2 / (2 * D + 1)
-    return np.stack(means), c * S
+    return np.stack([m + sign * steps[:, i] for i in range(m.shape[0]) for sign in (1.0, -1.0)])
+
+
+def start_samples(m, S, count: int, seed: int) -> np.ndarray:
+    """``count`` draws from ``N(m, S)`` (a covariance with zero eigenvalues allowed), from
+    the generator of ``seed``. Shapes: m [D], S [D, D] -> [count, D]."""
+    m = np.asarray(m, dtype=np.float64).reshape(-1)
+    S = np.asarray(S, dtype=np.float64)
+    lam, V = np.linalg.eigh(0.5 * (S + S.T))
+    root = V * np.sqrt(np.clip(lam, 0.0, None))[None, :]  # root @ root.T == S
+    z = np.random.default_rng(seed).standard_normal((int(count), m.shape[0]))
+    return m[None, :] + z @ root.T
+
+
+def check_start_points(points, num_tasks: int, state_dim: int):
+    """Known start states of the policy objective: None (or an empty array) for none,
+    else finite numbers of shape [P, D] (one task) or [T, P, D] (one set per task).
+    Returns None or a float64 array [T, P, D]."""
+    if points is None:
+        return None
+    arr = _numpy(points)
+    if not isinstance(arr, np.ndarray) or arr.dtype == object or arr.dtype.kind not in "biuf":
+        raise TypeError(f"start points must be an array of numbers, got {type(points).__name__}")
+    if arr.size == 0:
+        return None
+    if arr.ndim == 2 and num_tasks == 1:
+        arr = arr[None]
+    T, D = num_tasks, state_dim
+    if arr.ndim != 3 or arr.shape[0] != T or arr.shape[2] != D:
+        want = f"(P, {D}) or (1, P, {D})" if T == 1 else f"({T}, P, {D}) (one set per task)"
+        raise ValueError(f"start points must have shape {want}, got {arr.shape}")
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("start points must be finite")
+    return arr

@@ -128,6 +128,10 @@ class Task:
             policy_start_mixture=s.policy_start_mixture,
             policy_start_mixture_when=s.policy_start_mixture_when,
             policy_fragile_gap=s.policy_fragile_gap,
+            policy_flank_points=s.policy_flank_points,
+            policy_start_samples=s.policy_start_samples,
+            policy_start_scale=s.policy_start_scale,
+            policy_start_points_when=s.policy_start_points_when,
             render=not s.no_render, predictions=not s.no_figures, quiet=s.quiet, **task)
 
     #: False when the task changes its system during a run (the adaptation breaks its arm):

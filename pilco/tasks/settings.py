@@ -197,6 +197,26 @@ class RunSettings:
         1.0, "gap between the plain and the start mixture's expected return (in steps at "
         "full cost) above which a policy is fragile", kind=non_negative_float,
         group="learning")
+    policy_flank_points: Optional[float] = setting(
+        None, "beside the policy objective's start distribution (one moment-matched "
+        "Gaussian), roll out the 2D known states this many standard deviations out along "
+        "each of its principal axes through the model's mean dynamics and weigh their "
+        "return with the Gaussian's, so that a policy failing from the flanks of the start "
+        "distribution is seen to fail (0: off)", kind=non_negative_float, group="learning",
+        unset="off")
+    policy_start_samples: int = setting(
+        0, "the same with this many known states drawn from the start distribution (drawn "
+        "again in every episode; 0: off)", kind=non_negative_int, group="learning")
+    policy_start_scale: Optional[float] = setting(
+        None, "beside the policy objective's start distribution, propagate one this many "
+        "times as wide (its standard deviations) and average their expected returns, so "
+        "that the objective sees the flanks of the start distribution with the model's "
+        "uncertainty there (0: off; twice the cost per evaluation)",
+        kind=non_negative_float, group="learning", unset="off")
+    policy_start_points_when: str = setting(
+        "solved", "use --policy-flank-points, --policy-start-samples and "
+        "--policy-start-scale in every policy search, or only once an episode was solved",
+        choices=("always", "solved"), group="learning")
     model_min_rel_improvement: Optional[float] = setting(
         None, "stop GP training once its loss fell by less than this fraction of it over "
         "the last 10 iterations (0: never)", kind=float, group="learning", unset="never")
