@@ -178,9 +178,12 @@ def test_policy_search_with_start_points_improves_their_objective():
     assert p.start_points is not None
 
 
-def test_xla_points_objective_agrees_with_the_graph():
+@pytest.mark.parametrize("points, scale", [(True, None), (False, 2.0), (True, 1.5)],
+                         ids=["points", "wide", "both"])
+def test_xla_points_objective_agrees_with_the_graph(points, scale):
     p = agent("rbf", (1,), reward=target_reward())
-    p.start_points = _points(M0[0], S0)
+    p.start_points = _points(M0[0], S0) if points else None
+    p.start_scale = scale
     graph = p.expected_return()
     xla = tf.function(p._rollout.xla_points_policy_loss, jit_compile=True, autograph=False)
     assert -float(xla().numpy()) == pytest.approx(graph, rel=1e-10)
