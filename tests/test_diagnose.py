@@ -122,6 +122,26 @@ def test_diagnose_a_run_directory_writes_every_field(run_dir):
     assert "other start states" in format_report(result)
 
 
+def test_the_start_check_compares_the_plain_objective_with_the_mixture(run_dir):
+    """Whatever start points or wide start the run's search had (the cart-pole's once
+    solved), the check's plain return is the one Gaussian's, and they are left in place."""
+    from pilco.diagnose.checks import start_check
+
+    exp = reopen(run_dir)
+    agent = exp.agent
+    plain = agent.expected_return()
+    agent.start_spread = 0.5
+    mixed = agent.expected_return()
+    agent.start_spread = None
+    agent.start_scale = 2.0
+    agent.start_points = agent.m_init + 0.3
+    assert agent.expected_return() != pytest.approx(plain, rel=1e-6)
+    out = start_check(exp, 3, None, 0, spread=0.5)
+    assert out["plain_return"] == pytest.approx(plain, rel=1e-12)
+    assert out["mixture_return"] == pytest.approx(mixed, rel=1e-12)
+    assert agent.start_scale == 2.0 and agent.start_points is not None
+
+
 def test_an_earlier_episode_is_replayed_with_the_runs_settings(run_dir):
     exp = reopen(run_dir)
     view, info = agent_of_episode(exp, 2)

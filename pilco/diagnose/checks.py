@@ -301,16 +301,26 @@ def start_check(view, number: int, env, starts: int, spread: float = 1.5) -> Dic
     agent, cfg = view.agent, view.config
     # at most sqrt(D) standard deviations out: the mixture needs spread < sqrt(D + 1/2)
     spread = min(float(spread), float(np.sqrt(agent.state_dim)))
-    out: Dict[str, Any] = {"starts": int(starts), "solved": None, "solved_fraction": None,
-                           "plain_return": float(agent.expected_return()),
-                           "mixture_return": None, "spread": float(spread)}
-    if hasattr(agent, "start_spread"):
-        before = agent.start_spread
-        try:
-            agent.start_spread = spread
-            out["mixture_return"] = float(agent.expected_return())
-        finally:
-            agent.start_spread = before
+    # the plain objective: without the start points and wide start the run's search had
+    kept = {name: getattr(agent, name) for name in ("start_points", "start_scale")
+            if getattr(agent, name, None) is not None}
+    try:
+        for name in kept:
+            setattr(agent, name, None)
+        out: Dict[str, Any] = {"starts": int(starts), "solved": None,
+                               "solved_fraction": None,
+                               "plain_return": float(agent.expected_return()),
+                               "mixture_return": None, "spread": float(spread)}
+        if hasattr(agent, "start_spread"):
+            before = agent.start_spread
+            try:
+                agent.start_spread = spread
+                out["mixture_return"] = float(agent.expected_return())
+            finally:
+                agent.start_spread = before
+    finally:
+        for name, value in kept.items():
+            setattr(agent, name, value)
     if env is None or starts <= 0:
         return out
     seeds = np.random.default_rng([int(cfg.seed), number, 7]).integers(2 ** 31, size=starts)

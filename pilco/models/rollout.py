@@ -501,7 +501,8 @@ class Rollout(gpflow.base.Module):
     def policy_loss(self):
         """The policy objective (a scalar): minus the sum over the T start distributions
         of the total expected reward of ``horizon`` steps (each task's the mean over its
-        start mixture when one is set, else with its start points when they are set). Traced inside the optimiser's compiled function,
+        start mixture when one is set, else with its start points and wide start when
+        set). Traced inside the optimiser's compiled function,
         the whole sum and its gradient are one graph."""
         return _negative_sum(self.task_totals())
 
