@@ -20,6 +20,13 @@ def _as_float(x) -> tf.Tensor:
     return tf.convert_to_tensor(x, dtype=default_float())
 
 
+def _interleave(count: int, dtype) -> tf.Tensor:
+    """The constant permutation [2I, 2I] that takes columns in blocks
+    ``[sin θ1..θI, cos θ1..θI]`` to ``[sin θ1, cos θ1, sin θ2, ...]`` (I = ``count``)."""
+    order = np.stack([np.arange(count), count + np.arange(count)], axis=1).reshape(-1)
+    return tf.constant(np.eye(2 * count)[:, order], dtype=dtype)
+
+
 def trig_moments(m, s, indices: Sequence[int], scale=None):
     """Moments of ``scale * [sin x_i, cos x_i]`` for the angle dimensions ``indices``.
 
@@ -65,8 +72,7 @@ def trig_moments(m, s, indices: Sequence[int], scale=None):
     # C = inv(s) Cov[x, (sin, cos)]: column k of sin is e_k cos, of cos is -e_k sin
     C = tf.concat([pick * mcos, pick * -msin], 1)  # [D, 2I]
     if I > 1:
-        order = np.stack([np.arange(I), I + np.arange(I)], axis=1).reshape(-1)
-        perm = tf.constant(np.eye(2 * I)[:, order], dtype=m.dtype)  # block -> interleaved
+        perm = _interleave(I, m.dtype)  # block -> interleaved
         M = tf.matmul(M, perm)
         S = tf.matmul(perm, tf.matmul(S, perm), transpose_a=True)
         C = tf.matmul(C, perm)
@@ -119,6 +125,5 @@ def point_features(x, angle_indices: Sequence[int]):
     trig = tf.concat([tf.sin(theta), tf.cos(theta)], axis=1)  # blocks [sin..., cos...]
     I = len(ang)
     if I > 1:
-        order = np.stack([np.arange(I), I + np.arange(I)], axis=1).reshape(-1)
-        trig = tf.matmul(trig, tf.constant(np.eye(2 * I)[:, order], dtype=x.dtype))
+        trig = tf.matmul(trig, _interleave(I, x.dtype))
     return tf.concat([tf.matmul(x, keep), trig], axis=1)

@@ -164,15 +164,7 @@ class ExperimentConfig:
                 or not self.policy_fragile_gap >= 0):
             raise ValueError(f"policy_fragile_gap must be a number >= 0, got "
                              f"{self.policy_fragile_gap!r}")
-        if self.policy_start_mixture == 0:
-            self.policy_start_mixture = None
-        if self.policy_start_mixture is not None and (
-                isinstance(self.policy_start_mixture, bool)
-                or not isinstance(self.policy_start_mixture, (int, float))
-                or self.policy_start_mixture < 0):
-            raise ValueError(f"policy_start_mixture must be a number >= 0 or None, got "
-                             f"{self.policy_start_mixture!r}")
-        for name in ("policy_flank_points", "policy_start_scale"):
+        for name in ("policy_start_mixture", "policy_flank_points", "policy_start_scale"):
             value = getattr(self, name)
             if value == 0:
                 setattr(self, name, None)

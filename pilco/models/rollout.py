@@ -71,12 +71,17 @@ def _right(A, pick):
     return A if pick is None else tf.matmul(A, pick)
 
 
-def _negative_sum(totals):
-    """Minus the sum of the tasks' totals (a list of [1, 1] tensors), as a scalar."""
+def _sum(totals):
+    """The sum of a list of [1, 1] tensors, added left to right."""
     total = totals[0]
     for t in totals[1:]:
         total = total + t
-    return -total[0, 0]
+    return total
+
+
+def _negative_sum(totals):
+    """Minus the sum of the tasks' totals (a list of [1, 1] tensors), as a scalar."""
+    return -_sum(totals)[0, 0]
 
 
 class Rollout(gpflow.base.Module):
@@ -493,10 +498,7 @@ class Rollout(gpflow.base.Module):
             estimates.append(points(known))
         if scale2 is not None:
             estimates.append(gaussian(m, scale2 * s))
-        total = estimates[0]
-        for e in estimates[1:]:
-            total = total + e
-        return total / float(len(estimates))
+        return _sum(estimates) / float(len(estimates))
 
     def policy_loss(self):
         """The policy objective (a scalar): minus the sum over the T start distributions
