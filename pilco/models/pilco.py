@@ -327,7 +327,7 @@ class PILCO(gpflow.base.Module):
 
     @start_scale.setter
     def start_scale(self, value) -> None:
-        self._rollout.set_start_scale(check_spread(value, self.state_dim, "start scale"))
+        self._rollout.set_start_scale(check_spread(value, self.state_dim, "start scale", mixture=False))
 
     @property
     def context_indices(self):

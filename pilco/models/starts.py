@@ -90,10 +90,11 @@ def check_task(task, num_tasks: int) -> int:
     return int(task)
 
 
-def check_spread(spread, state_dim: int, what: str = "start mixture spread"):
+def check_spread(spread, state_dim: int, what: str = "start mixture spread",
+                 mixture: bool = True):
     """``None`` or 0 (off), else a float ``0 < spread < sqrt(D + 1/2)`` for a start mixture
     (the components' covariance ``(1 - 2 spread² / (2D + 1)) S`` must stay positive), any
-    finite number > 0 for anything else ``what`` names (flank points, a start scale)."""
+    finite number > 0 without ``mixture`` (a start scale); messages name it ``what``."""
     if spread is None:
         return None
     if isinstance(spread, (bool, np.bool_)) or not isinstance(spread, (int, float, np.number)):
@@ -101,10 +102,10 @@ def check_spread(spread, state_dim: int, what: str = "start mixture spread"):
     spread = float(spread)
     if spread == 0.0:
         return None
-    if what == "start mixture spread":
+    if mixture:
         limit = float(np.sqrt(state_dim + 0.5))
         if not 0.0 < spread < limit:
-            raise ValueError(f"start mixture spread must be in (0, {limit:.3f}) for a "
+            raise ValueError(f"{what} must be in (0, {limit:.3f}) for a "
                              f"{state_dim}-dimensional state (0 or None: no mixture), got "
                              f"{spread}")
     elif not (spread > 0.0 and np.isfinite(spread)):
@@ -137,6 +138,14 @@ def start_mixture(m, S, spread: float) -> Tuple[np.ndarray, np.ndarray]:
     return np.concatenate([m[None], flank_points(m, S, spread)]), c * S
 
 
+def _principal_axes(S) -> Tuple[np.ndarray, np.ndarray]:
+    """The standard deviations ``sqrt(λ_i)`` [D] along the eigenvectors ``v_i`` (the
+    columns of V [D, D]) of the symmetrised covariance ``S`` (zero eigenvalues allowed)."""
+    S = np.asarray(S, dtype=np.float64)
+    lam, V = np.linalg.eigh(0.5 * (S + S.T))
+    return np.sqrt(np.clip(lam, 0.0, None)), V
+
+
 def flank_points(m, S, spread: float) -> np.ndarray:
     """The 2D states ``m ± spread * sqrt(λ_i) v_i`` along the eigenvectors ``v_i`` of
     ``S`` (eigenvalues ``λ_i``): ``spread`` standard deviations out along each principal
@@ -145,9 +154,8 @@ def flank_points(m, S, spread: float) -> np.ndarray:
     Shapes: m [D], S [D, D], spread > 0 -> [2D, D].
     """
     m = np.asarray(m, dtype=np.float64).reshape(-1)
-    S = np.asarray(S, dtype=np.float64)
-    lam, V = np.linalg.eigh(0.5 * (S + S.T))
-    steps = spread * np.sqrt(np.clip(lam, 0.0, None))[None, :] * V  # column i: step along v_i
+    std, V = _principal_axes(S)
+    steps = spread * std[None, :] * V  # column i: step along v_i
     return np.stack([m + sign * steps[:, i] for i in range(m.shape[0]) for sign in (1.0, -1.0)])
 
 
@@ -155,10 +163,9 @@ def start_samples(m, S, count: int, seed: int) -> np.ndarray:
     """``count`` draws from ``N(m, S)`` (a covariance with zero eigenvalues allowed), from
     the generator of ``seed``. Shapes: m [D], S [D, D] -> [count, D]."""
     m = np.asarray(m, dtype=np.float64).reshape(-1)
-    S = np.asarray(S, dtype=np.float64)
-    lam, V = np.linalg.eigh(0.5 * (S + S.T))
-    root = V * np.sqrt(np.clip(lam, 0.0, None))[None, :]  # root @ root.T == S
     z = np.random.default_rng(seed).standard_normal((int(count), m.shape[0]))
+    std, V = _principal_axes(S)
+    root = V * std[None, :]  # root @ root.T == S
     return m[None, :] + z @ root.T
 
 
