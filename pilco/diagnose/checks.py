@@ -31,6 +31,7 @@ and returns a JSON-ready dict; the distances are those of the cost's geometry
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
@@ -288,6 +289,20 @@ def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restart
             "better_solves_real": solves}
 
 
+@contextlib.contextmanager
+def _objective(agent, **settings):
+    """Set those of the agent's objective ``settings`` (``start_spread``, ``start_points``,
+    ``start_scale``) it has, and put the previous values back on the way out."""
+    before = {name: getattr(agent, name) for name in settings if hasattr(agent, name)}
+    try:
+        for name in before:
+            setattr(agent, name, settings[name])
+        yield
+    finally:
+        for name, value in before.items():
+            setattr(agent, name, value)
+
+
 def start_check(view, number: int, env, starts: int, spread: float = 1.5) -> Dict[str, Any]:
     """How the episode's policy fares from the whole start distribution: run on the real
     system from ``starts`` fresh start states (seeds drawn from the run's seed and the
@@ -302,25 +317,14 @@ def start_check(view, number: int, env, starts: int, spread: float = 1.5) -> Dic
     # at most sqrt(D) standard deviations out: the mixture needs spread < sqrt(D + 1/2)
     spread = min(float(spread), float(np.sqrt(agent.state_dim)))
     # the plain objective: without the start points and wide start the run's search had
-    kept = {name: getattr(agent, name) for name in ("start_points", "start_scale")
-            if getattr(agent, name, None) is not None}
-    try:
-        for name in kept:
-            setattr(agent, name, None)
+    with _objective(agent, start_points=None, start_scale=None):
         out: Dict[str, Any] = {"starts": int(starts), "solved": None,
                                "solved_fraction": None,
                                "plain_return": float(agent.expected_return()),
                                "mixture_return": None, "spread": float(spread)}
         if hasattr(agent, "start_spread"):
-            before = agent.start_spread
-            try:
-                agent.start_spread = spread
+            with _objective(agent, start_spread=spread):
                 out["mixture_return"] = float(agent.expected_return())
-            finally:
-                agent.start_spread = before
-    finally:
-        for name, value in kept.items():
-            setattr(agent, name, value)
     if env is None or starts <= 0:
         return out
     seeds = np.random.default_rng([int(cfg.seed), number, 7]).integers(2 ** 31, size=starts)
