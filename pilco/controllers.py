@@ -254,6 +254,9 @@ class RbfController(_SquashedController):
             0.1 * rng.standard_normal((self.num_basis_functions, self.control_dim))
         )
         self.models = [_PolicyOutput(self.state_dim) for _ in range(self.control_dim)]
+        #: how :meth:`randomize` draws a fresh policy (a policy search's restarts): None
+        #: for its own draw, or ``f(controller, seed)``, e.g. a task's initial policy
+        self.randomizer: Optional[Callable[["RbfController", Optional[int]], None]] = None
 
     def set_data(self, data):
         """Set centers [n, D] and targets [n, U] (``n`` must stay the same)."""
@@ -315,7 +318,11 @@ class RbfController(_SquashedController):
         self.set_data((centers, targets))
 
     def randomize(self, scale: float = 1.0, seed: Optional[int] = None):
-        """Draw fresh centers ~ N(0, scale^2), targets ~ N(0, 0.1^2), lengthscales ~ 1."""
+        """Draw fresh centers ~ N(0, scale^2), targets ~ N(0, 0.1^2), lengthscales ~ 1;
+        with a :attr:`randomizer` set, ``randomizer(self, seed)`` draws instead."""
+        if self.randomizer is not None:
+            self.randomizer(self, seed)
+            return
         rng = generator(seed)
         self.centers.assign(scale * rng.standard_normal(self.centers.shape))
         self.targets.assign(0.1 * rng.standard_normal(self.targets.shape))

@@ -320,6 +320,13 @@ def test_policy_restarts_can_stop_once_an_episode_is_solved(tmp_path):
     at = config(policy_restarts=2, policy_restart_when="unsolved", policy_restart_from=5)
     assert [at.policy_restarts_at(n, False) for n in (2, 4, 5, 8)] == [1, 1, 2, 2]
     assert at.policy_restarts_at(6, True) == 1
+    # a step widens the search in each further unsolved episode
+    grows = config(policy_restarts=2, policy_restart_when="unsolved", policy_restart_from=5,
+                   policy_restart_step=1)
+    assert [grows.policy_restarts_at(n, False) for n in (4, 5, 6, 8)] == [1, 2, 3, 5]
+    assert grows.policy_restarts_at(7, True) == 1
+    with pytest.raises(ValueError, match="policy_restart_step must be a whole number >= 0"):
+        config(policy_restart_step=-1)
     with pytest.raises(ValueError, match="policy_restart_from must be a whole number"):
         config(policy_restart_from=0)
     with pytest.raises(ValueError, match="policy_restart_when must be 'always' or 'unsolved'"):

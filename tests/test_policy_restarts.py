@@ -102,3 +102,44 @@ def test_restarts_are_repeatable_with_a_seed(agent):
     assert agent.optimize_policy(maxiter=5, restarts=2, seed=7) == first
     for x, y in zip(parameters(agent), first_policy):
         np.testing.assert_array_equal(x, y)
+
+
+def test_a_controllers_randomizer_draws_the_restarts(agent):
+    """With ``randomizer`` set, every restart's policy comes from it (with a seed of the
+    search's generator); without it, ``randomize`` draws its own."""
+    seeds = []
+
+    def near_zero(controller, seed):
+        seeds.append(seed)
+        rng = np.random.default_rng(seed)
+        controller.set_data((0.01 * rng.standard_normal((5, D)), np.zeros((5, U))))
+
+    agent.controller.randomizer = near_zero
+    try:
+        agent.optimize_policy(maxiter=2, restarts=3, seed=4)
+        assert len(seeds) == 2 and len(set(seeds)) == 2
+        agent.controller.randomize(seed=7)
+        assert seeds[-1] == 7
+        assert np.abs(agent.controller.centers.numpy()).max() < 0.1
+    finally:
+        agent.controller.randomizer = None
+    agent.controller.randomize(seed=7)
+    assert np.abs(agent.controller.centers.numpy()).max() > 0.1  # N(0, I) centres
+
+
+def test_the_cartpoles_restarts_are_drawn_as_its_initial_policy(tmp_path):
+    from pilco.tasks.cartpole import CARTPOLE
+
+    s = CARTPOLE.parse(["--output", str(tmp_path), "--seed", "3"])
+    rng = np.random.default_rng(0)
+    X, Y = rng.normal(size=(20, 5)), 0.01 * rng.normal(size=(20, 4))
+    controller = CARTPOLE.agent_builder(s, None)((X, Y), None).controller
+    controller.models[0].kernel.lengthscales.assign(np.full(5, 3.0))
+    controller.randomize(seed=11)
+    centers = controller.centers.numpy()  # [x, dx, dtheta, sin theta, cos theta]
+    assert np.abs(centers[:, :4]).max() < 0.5 and np.all(centers[:, 4] > 0.9)
+    np.testing.assert_allclose(controller.models[0].kernel.lengthscales.numpy(),
+                               [1.0, 1.0, 1.0, 0.7, 0.7])
+    random = CARTPOLE.agent_builder(CARTPOLE.parse(["--output", str(tmp_path),
+                                                    "--policy-init", "random"]), None)
+    assert random((X, Y), None).controller.randomizer is None

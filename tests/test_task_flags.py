@@ -75,8 +75,9 @@ def test_cartpole_restarts_late_by_default_and_saved_runs_resume_with_their_sett
         tmp_path):
     args = CARTPOLE.parse(["--output", str(tmp_path / "new")])
     config = CARTPOLE.config(args)
-    # no restarts before episode 5, two runs per search from there while unsolved
-    assert [config.policy_restarts_at(n, False) for n in (2, 4, 5, 8)] == [1, 1, 2, 2]
+    # no restarts before episode 5, two runs per search there and one more in each
+    # further episode while unsolved
+    assert [config.policy_restarts_at(n, False) for n in (2, 4, 5, 6, 8)] == [1, 1, 2, 3, 5]
     assert config.policy_restarts_at(6, True) == 1
     # a saved run's settings win over the defaults; one it lacks takes today's default
     saved = tmp_path / "saved"

@@ -48,6 +48,10 @@ class ExperimentConfig:
             ``policy_restart_when="unsolved"`` a run solved before that episode never
             restarts, so it costs and learns exactly as without restarts; one still
             unsolved there gets them (a stuck warm start is what they fix).
+        policy_restart_step: restarts added in each episode after
+            ``policy_restart_from`` in which the restarts still run (0: the same
+            ``policy_restarts`` in every one): with ``policy_restart_when="unsolved"``, the
+            longer a run stays unsolved, the wider its search.
         policy_warm_start: ``"always"``: every policy search starts from the policy of
             the episode before; ``"solved"``: only once an episode was solved; before
             that, each learned episode after the first starts from a fresh random policy
@@ -68,8 +72,8 @@ class ExperimentConfig:
         policy_start_samples: the number of known start states drawn from the start
             distribution for the policy objective (:func:`pilco.models.starts.start_samples`,
             drawn again in every episode; 0: none).
-        policy_start_scale: a wide start beside the start distribution, this many times
-            its standard deviations (:attr:`pilco.models.PILCO.start_scale`; ``None`` or 0:
+        policy_start_scale: a wide start in place of the start distribution, this many
+            times its standard deviations (:attr:`pilco.models.PILCO.start_scale`; ``None`` or 0:
             none).
         policy_start_points_when: ``"always"``; ``"solved"``: the start points and the wide
             start are used
@@ -111,6 +115,7 @@ class ExperimentConfig:
     policy_early_stop: str = "always"
     policy_restart_when: str = "always"
     policy_restart_from: int = 1
+    policy_restart_step: int = 0
     policy_warm_start: str = "always"
     policy_start_mixture: Optional[float] = None
     policy_start_mixture_when: str = "solved"
@@ -171,11 +176,10 @@ class ExperimentConfig:
             elif value is not None and (isinstance(value, bool)
                                         or not isinstance(value, (int, float)) or value < 0):
                 raise ValueError(f"{name} must be a number >= 0 or None, got {value!r}")
-        if (isinstance(self.policy_start_samples, bool)
-                or not isinstance(self.policy_start_samples, int)
-                or self.policy_start_samples < 0):
-            raise ValueError(f"policy_start_samples must be a whole number >= 0, got "
-                             f"{self.policy_start_samples!r}")
+        for name in ("policy_start_samples", "policy_restart_step"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
         if self.max_data == 0:
             self.max_data = None
         if self.max_data is not None and self.max_data < 2:
@@ -231,9 +235,11 @@ class ExperimentConfig:
         """The policy search's runs (``policy_restarts``, or 1 without restarts) in
         episode ``number`` (1-based), given whether an earlier episode was solved: the
         restarts run from episode ``policy_restart_from`` on, and with
-        ``policy_restart_when="unsolved"`` only while nothing was solved."""
+        ``policy_restart_when="unsolved"`` only while nothing was solved; each episode
+        after ``policy_restart_from`` adds ``policy_restart_step`` more."""
         if number < self.policy_restart_from:
             return 1
         if self.policy_restart_when == "unsolved" and solved:
             return 1
-        return self.policy_restarts
+        return self.policy_restarts + self.policy_restart_step * (number
+                                                                  - self.policy_restart_from)

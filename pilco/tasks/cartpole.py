@@ -10,23 +10,26 @@ upright target (width 0.25 m); the policy is optimised with scipy's BFGS for up 
 iterations (the release's ``minimize``: BFGS, 150 line searches) and the GPs with
 L-BFGS-B for up to 300.
 
-A run not solved by episode 5 gets a second policy search per learned episode, from a
-random policy (``RbfController.randomize``), and keeps the better predicted return, until
-an episode is solved (``--policy-restarts 2 --policy-restart-when unsolved
---policy-restart-from 5``): the warm-started search of a stuck run keeps swinging the
-pole over the top, and a fresh start leaves that basin. A run solved sooner never
-restarts, so it costs and learns exactly as without them (``--policy-restarts 1`` turns
-them off).
+A run not solved by episode 5 gets more policy searches per learned episode, each from a
+fresh policy drawn as the initial one is (centres from the start distribution), and keeps
+the best predicted return, until an episode is solved: one more in episode 5, and one
+more in each episode after it that the run is still unsolved (``--policy-restarts 2
+--policy-restart-when unsolved --policy-restart-from 5 --policy-restart-step 1``). The
+warm-started search of a stuck run keeps swinging the pole over the top, a basin the
+model predicts to fail and the search does not leave; a fresh start can find a policy
+that holds the pole, but not every draw does, so the longer a run is stuck the more draws
+it gets (a policy with centres drawn from N(0, I) often starts where the cost is flat and
+never moves; ``--policy-init random`` draws so). A run solved sooner never restarts, so
+it costs and learns exactly as without them (``--policy-restarts 1`` turns them off).
 
-Once an episode was solved, the policy objective is the mean of the expected returns from
-the start distribution and from one twice as wide (``--policy-start-scale 2``, each
-propagated as one moment-matched Gaussian; 0 turns it off). The release's objective
+Once an episode was solved, the policy objective's start distribution is twice as wide
+(``--policy-start-scale 2``, 0 turns it off), at no extra cost. The release's objective
 propagates the start distribution as one Gaussian, which averages away the starts a
 policy fails from: a policy found on it can hold the pole from the centre of the start
 distribution and lose it from its flanks, so that a run drops the pole again in a later
-episode. The wide start shows the search those flanks, with the model's uncertainty
-there, at twice the cost of an evaluation in the episodes after the first success; before
-it, the swing-up is learned on the release's objective, unchanged.
+episode. Widened, the start distribution moves those flanks into its bulk, where the
+search sees them fail with the model's uncertainty there; before the first success, the
+swing-up is learned on the release's objective, unchanged.
 
 Two time savers, both switchable (0 turns them off): GP training stops once its loss fell
 by less than 0.05 % over 10 iterations (``--model-min-rel-improvement``), and policy
@@ -59,7 +62,7 @@ __all__ = ["CartPoleSettings", "CartPoleTask", "CARTPOLE", "init_policy_from_sta
                model_iters=300, output="runs/cartpole-seed{seed}", policy_optimizer="BFGS",
                policy_min_rel_improvement=0.003, model_min_rel_improvement=5e-4,
                policy_restarts=2, policy_restart_when="unsolved", policy_restart_from=5,
-               policy_start_scale=2.0)
+               policy_restart_step=1, policy_start_scale=2.0)
 class CartPoleSettings(RunSettings):
     """The cart-pole's settings (the MATLAB release's defaults)."""
 
@@ -76,8 +79,9 @@ class CartPoleSettings(RunSettings):
         "off", "'on': the policy sees a noisy measurement of the predicted state (variance "
         "+ half the dynamics noise), as the release's propagate.m", choices=("on", "off"))
     policy_init: str = setting(
-        "start", "initial RBF policy: 'start' draws its centers from the start distribution "
-        "as the MATLAB release does; 'random' from N(0, I)", choices=("start", "random"))
+        "start", "initial RBF policy and the restarts' policies: 'start' draws the centers "
+        "from the start distribution as the MATLAB release does; 'random' from N(0, I)",
+        choices=("start", "random"))
 
 
 def init_policy_from_start(controller, start_std: float, seed: int) -> None:
@@ -122,6 +126,9 @@ class CartPoleTask(Task):
                                        seed=s.seed)
             if s.policy_init == "start":
                 init_policy_from_start(controller, s.start_std, s.seed)
+                # the policy search's restarts are drawn as the initial policy is
+                controller.randomizer = lambda c, seed: init_policy_from_start(
+                    c, s.start_std, seed)
             return PILCO(data, controller,
                          CartPoleReward(pendulum_length=0.5, width=s.cost_width),
                          horizon=s.horizon, m_init=np.zeros((1, 4)),

@@ -144,6 +144,10 @@ class RunSettings:
     policy_restart_from: int = setting(
         1, "episode (1-based, random ones counted) from which --policy-restarts apply",
         kind=positive_int, group="learning")
+    policy_restart_step: int = setting(
+        0, "restarts added in each episode after --policy-restart-from in which restarts "
+        "run (with --policy-restart-when unsolved: the longer a run stays unsolved, the "
+        "wider its search)", kind=non_negative_int, group="learning")
     policy_patience: int = setting(10, "iterations for --policy-min-rel-improvement",
                                    kind=positive_int, group="learning")
     policy_iters_first: Optional[int] = setting(
@@ -208,10 +212,9 @@ class RunSettings:
         0, "the same with this many known states drawn from the start distribution (drawn "
         "again in every episode; 0: off)", kind=non_negative_int, group="learning")
     policy_start_scale: Optional[float] = setting(
-        None, "beside the policy objective's start distribution, propagate one this many "
-        "times as wide (its standard deviations) and average their expected returns, so "
-        "that the objective sees the flanks of the start distribution with the model's "
-        "uncertainty there (0: off; twice the cost per evaluation)",
+        None, "the policy objective's start distribution this many times as wide (its "
+        "standard deviations), so that the objective sees the flanks of the start "
+        "distribution fail, with the model's uncertainty there (0: off; the same cost)",
         kind=non_negative_float, group="learning", unset="off")
     policy_start_points_when: str = setting(
         "solved", "use --policy-flank-points, --policy-start-samples and "
