@@ -72,8 +72,8 @@ class ExperimentConfig:
         policy_start_samples: the number of known start states drawn from the start
             distribution for the policy objective (:func:`pilco.models.starts.start_samples`,
             drawn again in every episode; 0: none).
-        policy_start_scale: a wide start in place of the start distribution, this many
-            times its standard deviations (:attr:`pilco.models.PILCO.start_scale`; ``None`` or 0:
+        policy_start_scale: a wide start beside the start distribution, this many times
+            its standard deviations (:attr:`pilco.models.PILCO.start_scale`; ``None`` or 0:
             none).
         policy_start_points_when: ``"always"``; ``"solved"``: the start points and the wide
             start are used

@@ -299,8 +299,8 @@ class PILCO(gpflow.base.Module):
         objective). Each task's P points are rolled out through the policy and the
         model's mean dynamics (no uncertainty), and the task's total becomes the mean of
         the expected return of its start distribution, propagated as one moment-matched
-        Gaussian (widened by :attr:`start_scale` when set), and the points' mean return.
-        Points on the flanks of the
+        Gaussian, and the points' mean return (and the wide start's, :attr:`start_scale`,
+        when set). Points on the flanks of the
         start distribution (:func:`pilco.models.starts.flank_points`) or drawn from it
         (:func:`pilco.models.starts.start_samples`) show the objective a policy that fails
         from part of the start distribution, which the one Gaussian averages away, at a
@@ -317,14 +317,12 @@ class PILCO(gpflow.base.Module):
 
     @property
     def start_scale(self) -> Optional[float]:
-        """A wide start in place of the start distribution: None, or ``k``: each task's
-        expected return is that from ``N(m, k² S)`` instead of ``N(m, S)`` (averaged with
-        its start points', :attr:`start_points`, when set), one moment-matched Gaussian as
-        before, at the same cost. One Gaussian averages away the starts a policy fails
-        from; widened, the start distribution's flanks move into its bulk, where the
-        objective sees them fail, with the model's uncertainty there. Ignored while a
-        start mixture is set. Setting 0 or None switches it off. Predictions
-        (:meth:`predict_trajectory` and the like) keep the start distribution itself."""
+        """A wide start beside the start distribution: None, or ``k``: each task's total
+        becomes the mean of the expected returns from ``N(m, S)`` and from
+        ``N(m, k² S)`` (and of its start points', :attr:`start_points`, when set), both
+        moment-matched Gaussians, so that the objective sees what happens from the start
+        distribution's flanks with the model's uncertainty there, at twice the cost.
+        Ignored while a start mixture is set. Setting 0 or None switches it off."""
         return self._rollout.start_scale
 
     @start_scale.setter

@@ -18,10 +18,10 @@ The policy objective is the sum, over one or more start distributions (tasks), o
 expected rewards of ``horizon`` steps. With a start mixture (:meth:`Rollout.set_start_mixture`)
 each task's start distribution is split into 2D + 1 narrower Gaussians of the same mean and
 covariance (:func:`pilco.models.starts.start_mixture`), each propagated on its own, and the
-task's expected return is their mean. Without a mixture, a task's start distribution can
-be widened (:meth:`Rollout.set_start_scale`), and its total can be the mean of its
-Gaussian total and that of known start states followed through the policy and the model's
-mean dynamics (:meth:`Rollout.set_start_points`, :meth:`Rollout.point_step`). Each horizon is one
+task's expected return is their mean. Without a mixture, a task's total can also be the
+mean of its plain total and those of known start states followed through the policy and
+the model's mean dynamics (:meth:`Rollout.set_start_points`, :meth:`Rollout.point_step`)
+and of a wider Gaussian start (:meth:`Rollout.set_start_scale`). Each horizon is one
 ``tf.while_loop`` inside a compiled function, traced once; the
 dynamics GP's factorisation (Cholesky, ``beta`` and ``K^-1``) does not depend on the
 policy: :meth:`Rollout.refresh` computes it once per policy optimisation and stores it
@@ -209,9 +209,9 @@ class Rollout(gpflow.base.Module):
         return changed
 
     def set_start_scale(self, scale) -> None:
-        """In place of each task's start distribution ``N(m, S)``, propagate the wide
-        start ``N(m, scale² S)`` (``scale`` checked by the caller; None: none). The same
-        traced function serves both (the shapes are the same)."""
+        """Beside each task's start distribution ``N(m, S)``, propagate the wide start
+        ``N(m, scale² S)`` (``scale`` checked by the caller; None: none). The same traced
+        function serves both (the shapes are the same)."""
         self.start_scale = None if scale is None else float(scale)
 
     @property
@@ -438,10 +438,10 @@ class Rollout(gpflow.base.Module):
         with the horizon as a constant trip count (see :meth:`xla_policy_loss`).
         ``mixture`` (default: whether a start mixture is set) makes each task's total the
         mean over its start mixture's components (:meth:`set_start_mixture`); ``points``
-        (default: whether start points are set and no mixture) makes it the mean of the
-        Gaussian total and the mean total of its start points (:meth:`set_start_points`);
-        ``wide`` (default: whether a wide start is set and no mixture) propagates the
-        wide start (:meth:`set_start_scale`) in place of the start distribution."""
+        (default: whether start points are set and no mixture) and ``wide`` (default:
+        whether a wide start is set and no mixture) make it the mean of the plain total,
+        the mean total of its start points (:meth:`set_start_points`) and the total from
+        its wide start (:meth:`set_start_scale`)."""
         D = self.state_dim
         if mixture is None:
             mixture = self.start_spread is not None
@@ -489,19 +489,22 @@ class Rollout(gpflow.base.Module):
 
     @staticmethod
     def _task_total(m, s, known, scale2, gaussian, points):
-        """One task's total: the expected return of ``N(m, s)`` (``gaussian``), or of
-        the wide start ``N(m, scale2 s)`` when ``scale2`` is given, alone or, when
-        ``known`` start points are given, averaged with their mean return (``points``)."""
-        estimates = [gaussian(m, s if scale2 is None else scale2 * s)]
+        """One task's total: the mean of its estimates in use, the expected return of
+        ``N(m, s)`` (``gaussian``), its known start points' mean return (``points``, when
+        ``known`` is given) and the expected return of ``N(m, scale2 s)`` (when
+        ``scale2`` is given)."""
+        estimates = [gaussian(m, s)]
         if known is not None:
             estimates.append(points(known))
+        if scale2 is not None:
+            estimates.append(gaussian(m, scale2 * s))
         return _sum(estimates) / float(len(estimates))
 
     def policy_loss(self):
         """The policy objective (a scalar): minus the sum over the T start distributions
         of the total expected reward of ``horizon`` steps (each task's the mean over its
-        start mixture when one is set, else from its wide start and with its start points
-        when set). Traced inside the optimiser's compiled function,
+        start mixture when one is set, else with its start points and wide start when
+        set). Traced inside the optimiser's compiled function,
         the whole sum and its gradient are one graph."""
         return _negative_sum(self.task_totals())
 
@@ -515,8 +518,8 @@ class Rollout(gpflow.base.Module):
         return _negative_sum(self.task_totals(mixture=True))
 
     def points_policy_loss(self):
-        """:meth:`policy_loss` with each task's start widened and its total averaged with
-        its start points', whichever are set (no mixture)."""
+        """:meth:`policy_loss` with each task's total the mean of its plain total and those
+        of its start points and wide start, whichever are set (no mixture)."""
         return _negative_sum(self.task_totals(mixture=False))
 
     def xla_points_policy_loss(self):

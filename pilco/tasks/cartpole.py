@@ -22,13 +22,16 @@ it gets (a policy with centres drawn from N(0, I) often starts where the cost is
 never moves; ``--policy-init random`` draws so). A run solved sooner never restarts, so
 it costs and learns exactly as without them (``--policy-restarts 1`` turns them off).
 
-Once an episode was solved, the policy objective's start distribution is twice as wide
-(``--policy-start-scale 2``, 0 turns it off), at no extra cost. The release's objective
+Once an episode was solved, the policy objective is the mean of the expected returns from
+the start distribution and from one twice as wide (``--policy-start-scale 2``, each
+propagated as one moment-matched Gaussian; 0 turns it off). The release's objective
 propagates the start distribution as one Gaussian, which averages away the starts a
 policy fails from: a policy found on it can hold the pole from the centre of the start
 distribution and lose it from its flanks, so that a run drops the pole again in a later
-episode. Widened, the start distribution moves those flanks into its bulk, where the
-search sees them fail with the model's uncertainty there; before the first success, the
+episode. The wide start shows the search those flanks, with the model's uncertainty
+there; the start distribution's own term keeps the search in the basin of the policy
+that holds (searched on the wide start alone, runs dropped the pole again). An
+evaluation costs twice as much in the episodes after the first success; before it, the
 swing-up is learned on the release's objective, unchanged.
 
 Two time savers, both switchable (0 turns them off): GP training stops once its loss fell

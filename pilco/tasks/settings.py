@@ -212,9 +212,10 @@ class RunSettings:
         0, "the same with this many known states drawn from the start distribution (drawn "
         "again in every episode; 0: off)", kind=non_negative_int, group="learning")
     policy_start_scale: Optional[float] = setting(
-        None, "the policy objective's start distribution this many times as wide (its "
-        "standard deviations), so that the objective sees the flanks of the start "
-        "distribution fail, with the model's uncertainty there (0: off; the same cost)",
+        None, "beside the policy objective's start distribution, propagate one this many "
+        "times as wide (its standard deviations) and average their expected returns, so "
+        "that the objective sees the flanks of the start distribution with the model's "
+        "uncertainty there (0: off; twice the cost per evaluation)",
         kind=non_negative_float, group="learning", unset="off")
     policy_start_points_when: str = setting(
         "solved", "use --policy-flank-points, --policy-start-samples and "
