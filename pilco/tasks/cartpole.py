@@ -128,10 +128,10 @@ class CartPoleTask(Task):
             controller = RbfController(5, 1, s.basis_functions, s.max_force, squash,
                                        seed=s.seed)
             if s.policy_init == "start":
-                init_policy_from_start(controller, s.start_std, s.seed)
-                # the policy search's restarts are drawn as the initial policy is
+                # the initial policy and the policy search's restarts: one draw
                 controller.randomizer = lambda c, seed: init_policy_from_start(
                     c, s.start_std, seed)
+                controller.randomize(seed=s.seed)
             return PILCO(data, controller,
                          CartPoleReward(pendulum_length=0.5, width=s.cost_width),
                          horizon=s.horizon, m_init=np.zeros((1, 4)),
