@@ -241,5 +241,5 @@ class ExperimentConfig:
             return 1
         if self.policy_restart_when == "unsolved" and solved:
             return 1
-        return self.policy_restarts + self.policy_restart_step * (number
-                                                                  - self.policy_restart_from)
+        later = number - self.policy_restart_from
+        return self.policy_restarts + self.policy_restart_step * later

@@ -327,7 +327,8 @@ class PILCO(gpflow.base.Module):
 
     @start_scale.setter
     def start_scale(self, value) -> None:
-        self._rollout.set_start_scale(check_spread(value, self.state_dim, "start scale", mixture=False))
+        scale = check_spread(value, self.state_dim, "start scale", mixture=False)
+        self._rollout.set_start_scale(scale)
 
     @property
     def context_indices(self):
