@@ -142,6 +142,61 @@ def test_the_start_check_compares_the_plain_objective_with_the_mixture(run_dir):
     assert agent.start_scale == 2.0 and agent.start_points is not None
 
 
+def test_each_optimiser_candidate_is_one_search_from_its_own_start(run_dir):
+    """With restarts in the run's settings, a candidate of the optimiser check is still one
+    search from its start: the run's restarts would draw the same further policies for
+    every candidate, and the best of those would stand for each of them."""
+    import dataclasses
+
+    from pilco.diagnose.checks import optimiser_check
+
+    exp = reopen(run_dir)
+    exp.config = dataclasses.replace(exp.config, policy_restarts=3, policy_restart_from=1)
+    assert exp.config.policy_restarts_at(3, False) == 3
+    drawn = []
+
+    def randomizer(controller, seed):
+        drawn.append(seed)
+        rng = np.random.default_rng(seed)
+        controller.centers.assign(rng.standard_normal(controller.centers.shape))
+        controller.targets.assign(0.1 * rng.standard_normal(controller.targets.shape))
+
+    exp.agent.controller.randomizer = randomizer
+    geometry = cost_geometry(exp.agent.reward)
+    out = optimiser_check(exp, 3, geometry, restarts=2, seed=0, env=None,
+                          thresholds=Thresholds())
+    assert [c["start"] for c in out["candidates"]] == ["run", "continued", "random", "random"]
+    # two random candidates: two draws, one per candidate, each its candidate's seed
+    assert drawn == [c["seed"] for c in out["candidates"][2:]]
+    assert len(set(drawn)) == 2
+
+
+def test_the_report_shows_what_happens_between_its_rows(run_dir):
+    """A distance with a period of the rows' spacing (a pole spinning through the top
+    every 5 steps) reads as steady at the rows; the ranges between the rows show it."""
+    import copy
+
+    result = copy.deepcopy(diagnose(reopen(run_dir), restarts=0))
+    multi = result["model"]["multi_step"]
+    spin = np.where(np.arange(41) % 5 == 0, 0.07, 0.95)
+    spin[0] = 1.0
+    for key in ("pred_distance_mean", "real_distance"):
+        multi[key] = spin.copy()
+    multi["pred_distance_std"] = np.full(41, 0.02)
+    multi["pred_cost"] = multi["real_cost"] = saturating_cost(spin, WIDTH)
+    result["model"]["open_loop"]["distance"] = spin.copy()
+    report = format_report(result, every=5)
+    rows = [line.split() for line in report.splitlines()
+            if line.strip().split(" ")[0] in {"10", "15", "20"}]
+    assert len(rows) == 3
+    for row in rows:
+        assert row[1] == "0.070" and row[3] == "0.070"  # the rows alone: near the top
+        assert row[5] == "0.070-0.950" and row[6] == "0.070-0.950"  # between: the spin
+        # the block's summed cost: four steps far from the top, one near it
+        assert float(row[7]) == pytest.approx(float(np.sum(saturating_cost(spin[6:11],
+                                                                           WIDTH))), abs=1e-3)
+
+
 def test_an_earlier_episode_is_replayed_with_the_runs_settings(run_dir):
     exp = reopen(run_dir)
     view, info = agent_of_episode(exp, 2)

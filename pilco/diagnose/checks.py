@@ -17,8 +17,9 @@ Optimiser
     (:func:`optimiser_check`) the policy objective of the same model (the predicted cost
     summed over the planning horizon: what the policy optimiser minimises) of the run's
     policy, against ``restarts`` policy optimisations started from
-    ``controller.randomize`` and one that continues from the run's policy, each with the
-    run's settings for the episode (iterations, method, early stop). Each candidate policy
+    ``controller.randomize`` and one that continues from the run's policy, each one search
+    (no restarts) with the run's settings for the episode (iterations, method, early
+    stop). Each candidate policy
     is also run on the real system from the episode's start when an environment is given.
 Objective
     (:func:`objective_check`) the slope of the saturating cost ``1 - exp(-d² / 2σ_c²)`` at
@@ -265,7 +266,9 @@ def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restart
                         "the run's" if kind == "continued" else f"random (seed {s})", iters,
                         cfg.policy_method)
             t0 = time.perf_counter()
-            improve_policy(view, number)
+            # one search per candidate: the run's restarts would draw the same further
+            # starts for every candidate, and the best of them would hide the candidate's
+            improve_policy(view, number, runs=1)
             candidates.append(_candidate(view, number, geometry, kind, s, env,
                                          time.perf_counter() - t0, task))
             logger.info("optimiser check %d/%d: predicted cost %.3f (run's %.3f) in %.1f s", i,

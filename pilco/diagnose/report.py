@@ -12,9 +12,15 @@ def _f(value, fmt: str = ".3f") -> str:
     return "-" if value is None else format(value, fmt)
 
 
+def _range(values) -> str:
+    """``min-max`` of ``values`` (3 decimals), or "-" when there are none."""
+    return f"{min(values):.3f}-{max(values):.3f}" if len(values) else "-"
+
+
 def format_report(result: Dict[str, Any], every: int = 5) -> str:
     """The diagnosis as text: model, optimiser, objective, verdict and notes, with the
-    predicted and real distance and cost every ``every`` steps."""
+    predicted and real distance every ``every`` steps, their ranges and the cost summed
+    over the steps between two rows."""
     one, multi = result["model"]["one_step"], result["model"]["multi_step"]
     opt, obj, v = result["optimiser"], result["objective"], result["verdict"]
     lines = [f"Diagnosis of episode {result['episode']} of {result['episodes']} "
@@ -41,17 +47,28 @@ def format_report(result: Dict[str, Any], every: int = 5) -> str:
                   f"{'yes' if loop['wrong'] else 'no'}"]
     if "pred_distance_mean" in multi:
         lines += ["", "Model, multi-step from the start distribution under the episode's policy:",
+                  f"  (at each row's step; the ranges and the cost sums span the steps since "
+                  f"the row before)",
                   f"  {'step':>4} {'pred d':>8} {'± std':>7} {'real d':>8} {'open-loop d':>12} "
-                  f"{'pred cost':>10} {'real cost':>10}"]
+                  f"{'pred d range':>14} {'real d range':>14} {'pred cost':>10} "
+                  f"{'real cost':>10}"]
         open_d = loop.get("distance")
         pm, ps, rd = multi["pred_distance_mean"], multi["pred_distance_std"], multi["real_distance"]
         pc, rc = multi["pred_cost"], multi["real_cost"]
+        previous = 0
         for t in sorted(set(range(0, len(pm), every)) | {len(pm) - 1}):
+            # a row alone would alias a motion whose period divides ``every`` (a pole
+            # spinning through the top every 5 steps reads as held): the block's range shows it
+            block = range(previous + 1 if t else 0, t + 1)
             real = t < len(rd)
+            real_block = [rd[i] for i in block if i < len(rd)]
             lines.append(f"  {t:>4} {pm[t]:>8.3f} {ps[t]:>7.3f} "
                          f"{_f(rd[t] if real else None):>8} "
                          f"{_f(open_d[t] if real and open_d is not None else None):>12} "
-                         f"{pc[t]:>10.3f} {_f(rc[t] if real else None):>10}")
+                         f"{_range([pm[i] for i in block]):>14} {_range(real_block):>14} "
+                         f"{sum(pc[i] for i in block):>10.3f} "
+                         f"{_f(sum(rc[i] for i in block if i < len(rc)) if real else None):>10}")
+            previous = t
         lines.append(f"  final distance: predicted {multi['pred_final_distance']:.3f} ± "
                      f"{multi['pred_final_std']:.3f}, real {multi['real_final_distance']:.3f} "
                      f"({'inside' if multi['final_inside'] else 'outside'} ±2 std); closest: "

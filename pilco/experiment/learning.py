@@ -3,7 +3,7 @@ and the model's predictions kept for the figures."""
 from __future__ import annotations
 
 import logging
-from typing import Dict
+from typing import Dict, Optional
 
 import numpy as np
 
@@ -40,7 +40,7 @@ def train_model(exp, number: int) -> None:
     exp.model_trained_on = (X.copy(), Y.copy())
 
 
-def improve_policy(exp, number: int) -> float:
+def improve_policy(exp, number: int, runs: Optional[int] = None) -> float:
     """``optimize_policy`` with the run's settings; the relative early stop and the
     restarts as :meth:`ExperimentConfig.policy_early_stop_at` (always, or with
     ``policy_early_stop="solved"`` once an episode was solved) and
@@ -48,11 +48,12 @@ def improve_policy(exp, number: int) -> float:
     on; with ``policy_restart_when="unsolved"`` until an episode was solved), the
     start mixture as :meth:`ExperimentConfig.start_mixture_at` says and the start points
     as :meth:`ExperimentConfig.start_points_at` says.
-    The search starts from the agent's current policy (see :func:`learn_policy`).
+    The search starts from the agent's current policy (see :func:`learn_policy`);
+    ``runs`` overrides the number of runs (1: that one search alone, no restarts).
     Returns the predicted return."""
     cfg, agent = exp.config, exp.agent
     solved = exp.solved_at_episode() is not None
-    restarts = cfg.policy_restarts_at(number, solved)
+    restarts = cfg.policy_restarts_at(number, solved) if runs is None else int(runs)
     spread = cfg.start_mixture_at(solved)
     if spread is not None or getattr(agent, "start_spread", None) is not None:
         agent.start_spread = spread
