@@ -37,7 +37,7 @@ from .validation import (
     checked_arguments,
 )
 
-__all__ = ["squash_sin", "squash_sat", "LinearController", "RbfController"]
+__all__ = ["squash_sin", "squash_sat", "LinearController", "RbfController", "StartDraw"]
 
 #: shapes of the action moments at a Gaussian state: mean, covariance and
 #: ``V = inv(s) Cov[x, u]`` (``moments``, ``compute_action``)
@@ -230,6 +230,65 @@ class _PolicyOutput(gpflow.base.Module):
         gpflow.set_trainable(self.likelihood.variance, False)
 
 
+class StartDraw:
+    """A policy draw near a start distribution, as the MATLAB release initialises its RBF
+    policies: :meth:`RbfController.place_near` of ``mean`` [d] and ``std`` (centres at
+    states ``mean + std·z``, angles at ``angle_indices`` replaced by their sine and cosine,
+    targets ``target_std·N(0, 1)``), then the lengthscales [state_dim] set.
+
+    Used as an :attr:`RbfController.randomizer` (``draw(controller, seed)``), it is a
+    plain description, so an agent saved with it (``PILCO.save``) draws its restarts the
+    same way after ``PILCO.load``: a resumed run, or its diagnosis, searches as the run
+    did.
+    """
+
+    def __init__(self, mean, std: float, lengthscales, angle_indices=(),
+                 target_std: float = 0.1):
+        self.mean = np.asarray(mean, dtype=np.float64).reshape(-1)
+        if not np.all(np.isfinite(self.mean)):
+            raise ValueError(f"mean must be finite, got {self.mean}")
+        self.std = check_non_negative_float(std, "std")
+        self.target_std = check_non_negative_float(target_std, "target_std")
+        self.angle_indices = [int(i) for i in angle_indices]
+        bad = [i for i in self.angle_indices if not 0 <= i < self.mean.size]
+        if bad:
+            raise ValueError(f"angle_indices {bad} are not indices of a state of "
+                             f"{self.mean.size} dimensions")
+        self.lengthscales = np.asarray(lengthscales, dtype=np.float64).reshape(-1)
+        if self.lengthscales.size != self.mean.size + len(self.angle_indices) or \
+                not np.all(self.lengthscales > 0):
+            raise ValueError(f"lengthscales must be {self.mean.size + len(self.angle_indices)} "
+                             f"positive numbers (one per policy input), got {self.lengthscales}")
+
+    def __call__(self, controller: "RbfController", seed: Optional[int]) -> None:
+        from .features import angle_features
+
+        if controller.state_dim != self.lengthscales.size:
+            raise ValueError(f"this draw has {self.lengthscales.size} policy inputs, the "
+                             f"controller {controller.state_dim}")
+        features = (lambda x: angle_features(x, self.angle_indices)) \
+            if self.angle_indices else None
+        controller.place_near(self.mean, self.std, seed=seed, features=features,
+                              target_std=self.target_std)
+        for g in controller.models:
+            g.kernel.lengthscales.assign(self.lengthscales)
+
+    def to_dict(self) -> dict:
+        """The draw as JSON-ready settings (:meth:`from_dict` rebuilds it)."""
+        return dict(mean=self.mean.tolist(), std=self.std, lengthscales=self.lengthscales.tolist(),
+                    angle_indices=list(self.angle_indices), target_std=self.target_std)
+
+    @classmethod
+    def from_dict(cls, settings: dict) -> "StartDraw":
+        return cls(**settings)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, StartDraw) and self.to_dict() == other.to_dict()
+
+    def __repr__(self) -> str:
+        return f"StartDraw({', '.join(f'{k}={v!r}' for k, v in self.to_dict().items())})"
+
+
 class RbfController(_SquashedController):
     """Radial-basis-function policy, built as a deterministic GP (PILCO's ``congp``).
 
@@ -255,7 +314,8 @@ class RbfController(_SquashedController):
         )
         self.models = [_PolicyOutput(self.state_dim) for _ in range(self.control_dim)]
         #: how :meth:`randomize` draws a fresh policy (a policy search's restarts): None
-        #: for its own draw, or ``f(controller, seed)``, e.g. a task's initial policy
+        #: for its own draw, or ``f(controller, seed)``, e.g. a task's initial policy; a
+        #: :class:`StartDraw` is saved with the agent, other callables are not
         self.randomizer: Optional[Callable[["RbfController", Optional[int]], None]] = None
 
     def set_data(self, data):

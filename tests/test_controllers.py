@@ -1,8 +1,9 @@
 """RbfController.place_near: the MATLAB release's initial policy around a state distribution,
 shared by the reacher and cart-pole tasks."""
 import numpy as np
+import pytest
 
-from pilco.controllers import RbfController
+from pilco.controllers import RbfController, StartDraw
 from pilco.features import angle_features
 from pilco.tasks import cartpole
 
@@ -46,3 +47,26 @@ def test_features_map_the_drawn_states_to_policy_inputs():
     direct = RbfController(5, 1, 200, seed=0)
     direct.place_near(np.zeros(4), 0.1, seed=4, features=lambda x: angle_features(x, [3]))
     np.testing.assert_array_equal(direct.centers.numpy(), centers)
+
+
+def test_a_start_draw_is_place_near_with_its_lengthscales_and_refuses_bad_settings():
+    draw = StartDraw([0.0, 1.0, 0.0], 0.2, [0.5, 0.6, 0.7, 0.8], angle_indices=[1])
+    c = RbfController(4, 1, 6, seed=0)
+    draw(c, 5)
+    direct = RbfController(4, 1, 6, seed=0)
+    direct.place_near([0.0, 1.0, 0.0], 0.2, seed=5, features=lambda x: angle_features(x, [1]))
+    np.testing.assert_array_equal(c.centers.numpy(), direct.centers.numpy())
+    np.testing.assert_array_equal(c.targets.numpy(), direct.targets.numpy())
+    np.testing.assert_allclose(c.models[0].kernel.lengthscales.numpy(), [0.5, 0.6, 0.7, 0.8],
+                               rtol=1e-12)
+    assert StartDraw.from_dict(draw.to_dict()) == draw
+    assert StartDraw.from_dict({**draw.to_dict(), "std": 0.3}) != draw
+    with pytest.raises(ValueError, match="lengthscales must be 4 positive"):
+        StartDraw([0.0, 1.0, 0.0], 0.2, [1.0, 1.0, 1.0], angle_indices=[1])
+    with pytest.raises(ValueError, match="angle_indices \\[3\\]"):
+        StartDraw([0.0, 1.0, 0.0], 0.2, [1.0] * 4, angle_indices=[3])
+    with pytest.raises(ValueError, match="std"):
+        StartDraw([0.0], -1.0, [1.0])
+    with pytest.raises(ValueError, match="this draw has 4 policy inputs, the controller 3"):
+        draw(RbfController(3, 1, 6, seed=0), 1)
+

@@ -143,3 +143,39 @@ def test_the_cartpoles_restarts_are_drawn_as_its_initial_policy(tmp_path):
     random = CARTPOLE.agent_builder(CARTPOLE.parse(["--output", str(tmp_path),
                                                     "--policy-init", "random"]), None)
     assert random((X, Y), None).controller.randomizer is None
+
+
+def test_a_saved_cartpole_agent_restarts_as_the_run_did(tmp_path):
+    """The cart-pole's restart draw is saved with its agent: a resumed run (or its
+    diagnosis) loads an agent whose restarts are the built agent's, draw for draw."""
+    from pilco.controllers import StartDraw
+    from pilco.models import PILCO
+    from pilco.tasks.cartpole import CARTPOLE, start_draw
+
+    s = CARTPOLE.parse(["--output", str(tmp_path), "--seed", "3"])
+    rng = np.random.default_rng(0)
+    X, Y = rng.normal(size=(20, 5)), 0.01 * rng.normal(size=(20, 4))
+    built = CARTPOLE.agent_builder(s, None)((X, Y), None)
+    assert built.controller.randomizer == start_draw(0.1)
+    built.save(str(tmp_path / "agent.npz"))
+    loaded = PILCO.load(str(tmp_path / "agent.npz"))
+    assert isinstance(loaded.controller.randomizer, StartDraw)
+    for agent in (built, loaded):
+        agent.controller.randomize(seed=11)
+    for a, b in zip(built.controller.trainable_variables,
+                    loaded.controller.trainable_variables):
+        np.testing.assert_array_equal(a.numpy(), b.numpy())
+
+
+def test_a_randomizer_that_is_not_a_start_draw_is_not_saved(agent, tmp_path, caplog):
+    from pilco.models import PILCO
+
+    agent.controller.randomizer = lambda controller, seed: None
+    try:
+        with caplog.at_level("WARNING", logger="pilco.models.storage"):
+            agent.save(str(tmp_path / "agent.npz"))
+    finally:
+        agent.controller.randomizer = None
+    assert "is not saved" in caplog.text
+    assert PILCO.load(str(tmp_path / "agent.npz")).controller.randomizer is None
+

@@ -28,7 +28,7 @@ import gpflow
 import numpy as np
 
 from .. import __version__, moments
-from ..controllers import LinearController, RbfController, squash_sat, squash_sin
+from ..controllers import LinearController, RbfController, StartDraw, squash_sat, squash_sin
 from ..deploy import META_KEY, POLICY_FORMAT, POLICY_VERSION, read_npz
 from ..files import write_npz_atomic
 from ..rewards import (AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward,
@@ -125,6 +125,12 @@ def _controller_spec(controller, arrays, trainable) -> dict:
                     [g.kernel.variance for g in controller.models])
         _put_params(arrays, trainable, "controller/noise",
                     [g.likelihood.variance for g in controller.models])
+        draw = controller.randomizer
+        if isinstance(draw, StartDraw):
+            spec["randomizer"] = draw.to_dict()
+        elif draw is not None:
+            logger.warning("the controller's randomizer %r is not a StartDraw and is not "
+                           "saved: the loaded agent's restarts draw from N(0, I)", draw)
     elif kind is LinearController:
         spec = dict(type="LinearController", state_dim=controller.state_dim,
                     control_dim=controller.control_dim, squash=_squash_name(controller.squash))
@@ -157,6 +163,11 @@ def _build_controller(spec: dict, arrays, trainable, path):
                     "controller/variance", path)
         _get_params([g.likelihood.variance for g in c.models], arrays, trainable,
                     "controller/noise", path)
+        if spec.get("randomizer") is not None:
+            try:
+                c.randomizer = StartDraw.from_dict(spec["randomizer"])
+            except (TypeError, ValueError) as err:
+                raise ValueError(f"{path}: bad controller randomizer ({err})") from err
     elif kind == "LinearController":
         c = LinearController(spec["state_dim"], spec["control_dim"], max_action=max_action,
                              squash=squash)

@@ -53,12 +53,11 @@ import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
 from ..experiment.scoring import held_for_good_rule
-from ..features import angle_features
 from .base import Task
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
 
-__all__ = ["CartPoleSettings", "CartPoleTask", "CARTPOLE", "init_policy_from_start"]
+__all__ = ["CartPoleSettings", "CartPoleTask", "CARTPOLE", "init_policy_from_start", "start_draw"]
 
 
 @task_settings(episodes=8, horizon=40, basis_functions=10, policy_iters=150,
@@ -87,13 +86,19 @@ class CartPoleSettings(RunSettings):
         choices=("start", "random"))
 
 
+def start_draw(start_std: float):
+    """The MATLAB release's initial policy as a :class:`~pilco.controllers.StartDraw`:
+    centres drawn from the start distribution N(0, start_std² I) of ``[x, dx, dtheta,
+    theta]`` (policy input ``[x, dx, dtheta, sin theta, cos theta]``), targets
+    0.1·N(0, 1), lengthscales (1, 1, 1, 0.7, 0.7)."""
+    from ..controllers import StartDraw
+
+    return StartDraw(np.zeros(4), start_std, [1.0, 1.0, 1.0, 0.7, 0.7], angle_indices=[3])
+
+
 def init_policy_from_start(controller, start_std: float, seed: int) -> None:
-    """The MATLAB release's initial policy: centres drawn from the start distribution
-    N(0, start_std² I) of ``[x, dx, dtheta, theta]`` (policy input ``[x, dx, dtheta,
-    sin theta, cos theta]``), targets 0.1·N(0, 1), lengthscales (1, 1, 1, 0.7, 0.7)."""
-    controller.place_near(np.zeros(4), start_std, seed=seed,
-                          features=lambda states: angle_features(states, [3]))
-    controller.models[0].kernel.lengthscales.assign([1.0, 1.0, 1.0, 0.7, 0.7])
+    """Draw the MATLAB release's initial policy (:func:`start_draw`) into ``controller``."""
+    start_draw(start_std)(controller, seed)
 
 
 class CartPoleTask(Task):
@@ -128,9 +133,9 @@ class CartPoleTask(Task):
             controller = RbfController(5, 1, s.basis_functions, s.max_force, squash,
                                        seed=s.seed)
             if s.policy_init == "start":
-                # the initial policy and the policy search's restarts: one draw
-                controller.randomizer = lambda c, seed: init_policy_from_start(
-                    c, s.start_std, seed)
+                # the initial policy and the policy search's restarts: one draw, saved
+                # with the agent (a resumed run restarts as the run did)
+                controller.randomizer = start_draw(s.start_std)
                 controller.randomize(seed=s.seed)
             return PILCO(data, controller,
                          CartPoleReward(pendulum_length=0.5, width=s.cost_width),
