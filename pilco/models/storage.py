@@ -128,7 +128,9 @@ def _controller_spec(controller, arrays, trainable) -> dict:
         draw = controller.randomizer
         if isinstance(draw, StartDraw):
             spec["randomizer"] = draw.to_dict()
-        elif draw is not None:
+        elif draw is not None and getattr(controller, "_unsaved_randomizer", None) is not draw:
+            # said once per randomizer: a run saves its agent every episode
+            controller._unsaved_randomizer = draw
             logger.warning("the controller's randomizer %r is not a StartDraw and is not "
                            "saved: the loaded agent's restarts draw from N(0, I)", draw)
     elif kind is LinearController:
