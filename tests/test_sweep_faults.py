@@ -486,15 +486,21 @@ def interrupt(out, ray_folder, signum, address=None):
 
     The slow run's process is held (SIGSTOP) from its first saved episode on, and let go
     (SIGCONT) once the SIGTERM by which its Ray worker stops it is pending: so it is
-    under way when the driver is signalled, whatever the machine's load, and the stop
-    reaches it in the middle of an episode."""
+    under way when the driver is signalled, whatever the machine's load, and it stops at
+    its next safe point as a running run does."""
     quick, slow = (os.path.join(out, label, "seed-0") for label in (QUICK, SLOW))
     extra = [] if address is None else ["--address", address]
+
+    def slow_run_under_way():
+        """The slow run's processes once it saved an episode; an error if it finished."""
+        record = runs.read_json(os.path.join(slow, runs.RUN_RECORD)) or {}
+        assert record.get("status") != "finished", "the slow run finished before it was held"
+        return episodes(slow) and run_processes(slow)
+
     proc = sweep_process([interrupted(out)[0], *extra, *interrupted(out)[1:]], ray_folder)
     held = []
     try:
-        held = wait_for(lambda: episodes(slow) and run_processes(slow), 300,
-                        "the slow run to save an episode")
+        held = wait_for(slow_run_under_way, 300, "the slow run to save an episode")
         hold(held)
         wait_for(lambda: (runs.read_json(os.path.join(quick, runs.RUN_RECORD)) or {})
                  .get("status") == "finished", 300, "the quick run to finish")
