@@ -1,5 +1,5 @@
 """Start-up of pilco's command-line entry points: TensorFlow's log lines, logging, threads,
-XLA's compilation cache.
+XLA's compilation cache, a signal's handler for the length of a block.
 
 Every command (``pilco``, ``python -m pilco.tasks``, ``python -m pilco.sweep``,
 ``python -m pilco.diagnose``) calls :func:`quiet_tensorflow` before anything imports
@@ -18,6 +18,7 @@ import importlib.abc
 import logging
 import os
 import re
+import signal
 import sys
 import tempfile
 from typing import Dict, Iterator, List, Mapping, Optional, Union
@@ -27,7 +28,7 @@ __all__ = ["TF_LOG_LEVEL", "THREAD_VARIABLES", "quiet_tensorflow", "log_level",
            "reproducible_arithmetic",
            "configure_threads",
            "thread_environment", "XLA_CACHE_VARIABLE",
-           "xla_cache_directory", "use_xla_cache"]
+           "xla_cache_directory", "use_xla_cache", "signal_handler"]
 
 #: ``TF_CPP_MIN_LOG_LEVEL`` unless it is set: TensorFlow's C++ INFO and WARNING lines
 #: are hidden (they drown the progress output; pilco logs through :mod:`logging`)
@@ -382,3 +383,22 @@ def use_xla_cache(directory: Optional[str] = None) -> Optional[str]:
         return None
     os.environ["TF_XLA_FLAGS"] = f"{flags} {_XLA_CACHE_FLAG}={directory}".strip()
     return directory
+
+
+# ----------------------------------------------------------------------------- signals
+@contextlib.contextmanager
+def signal_handler(signum: int, handler) -> Iterator[None]:
+    """Within the block, ``handler`` handles ``signum``; the previous handler is restored
+    afterwards. Only the main thread can install handlers; elsewhere this does nothing.
+    (Here, not in :mod:`pilco.experiment.signals`, which uses it too: the sweep's Ray
+    workers import :mod:`pilco.sweep.runs`, which uses it, and must not import
+    :mod:`pilco.experiment`, whose package imports TensorFlow.)"""
+    try:
+        previous = signal.signal(signum, handler)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signum, previous)

@@ -247,6 +247,9 @@ def test_wide_start_is_averaged_with_the_start_distribution():
     p.start_scale = 0
     assert p.start_scale is None
     np.testing.assert_array_equal(p.expected_returns(), plain)
+    # the search, on the first task alone: the optimiser's compiled objective builds the
+    # gradient of each Gaussian it propagates (two per task), which three tasks triple
+    p.set_initial(TASKS_M[:1], TASKS_S[0])
     p.start_scale = 2.0
     before = p.expected_return()
     best = p.optimize_policy(maxiter=2)  # searched on the mean of the two

@@ -4,12 +4,16 @@ from __future__ import annotations
 import math
 import os
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from pilco.sweep import aggregate, cli, figures, flags, runs
 from pilco.tasks import TASKS, build_parser
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def summary(seed, solved_at=None, success=None, episodes=3, final=0.5, minimum=0.2,
@@ -240,6 +244,22 @@ def test_the_sweep_takes_the_tasks_of_pilco_tasks():
     with pytest.raises(ValueError, match=re.escape(f"unknown task 'nope'; choose one of "
                                                    f"{', '.join(TASKS)}")):
         build_parser("nope")
+
+
+def test_the_sweeps_ray_tasks_import_no_tensorflow():
+    """A Ray worker imports the module of its task, :mod:`pilco.sweep.runs`, and only
+    starts and watches a run's process: it loads no TensorFlow, GPflow or TensorFlow
+    Probability; the run's own process does."""
+    code = ("import sys\n"
+            "import pilco.sweep.runs\n"
+            "print(sorted(m for m in ('tensorflow', 'gpflow', 'tensorflow_probability')\n"
+            "             if m in sys.modules))\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [ROOT, *filter(None, [os.environ.get("PYTHONPATH")])]))
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]"
 
 
 def test_pendulum_is_a_sweep_task(tmp_path):

@@ -31,6 +31,9 @@ import pytest
 ray = pytest.importorskip("ray")
 
 from pilco.sweep import cli, preflight, runs  # noqa: E402 - after the skip
+# the cart-pole's module (and TensorFlow with it), imported here: the sweep imports it for
+# the task's flags, which the sweeps timed below would otherwise count
+from pilco.tasks import cartpole  # noqa: E402,F401
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -427,16 +430,14 @@ def test_a_corrupt_summary_is_run_again_not_counted(faulty_sweep, tmp_path):
 
 # ------------------------------------------------------------- the driver interrupted
 def interrupted(out):
-    """A sweep of two settings: 5-step episodes (a quick run) and 4000-step ones (about
-    ten seconds an episode; :data:`EPISODES` of them leave the driver time to be
-    signalled while the slow run is under way, also while the second sweep of
-    :func:`interrupt` starts on a busy machine: with 1000-step episodes the slow run
-    sometimes finished first)."""
-    return ["cartpole", "--seeds", "0", "--grid", "horizon=5,4000", "--output", str(out),
+    """A sweep of two settings: 5-step episodes (a quick run) and 400-step ones (a slow
+    run of :data:`EPISODES` episodes, which :func:`interrupt` holds still from its first
+    saved episode until it is told to stop)."""
+    return ["cartpole", "--seeds", "0", "--grid", "horizon=5,400", "--output", str(out),
             "--no-progress", "--no-figures", "--max-retries", "0", "--", "--episodes",
             str(EPISODES), "--random-episodes", str(EPISODES)]
-QUICK, SLOW = "horizon=5", "horizon=4000"
-EPISODES = 5
+QUICK, SLOW = "horizon=5", "horizon=400"
+EPISODES = 3
 
 
 def driver_logs(ray_folder, pid):
@@ -448,17 +449,61 @@ def driver_logs(ray_folder, pid):
                                                                               "logs"))))
 
 
+def pending_signals(pid):
+    """The signals pending for process ``pid`` (a bit mask, bit ``n - 1`` for signal
+    ``n``), or None once the process is gone."""
+    try:
+        with open(f"/proc/{pid}/status", encoding="ascii") as fh:
+            fields = dict(line.split(":", 1) for line in fh if ":" in line)
+    except OSError:
+        return None
+    return int(fields["SigPnd"], 16) | int(fields["ShdPnd"], 16)
+
+
+def stopping(pids, signum):
+    """True once each process of ``pids`` has ``signum`` pending or is gone."""
+    masks = [pending_signals(pid) for pid in pids]
+    return all(mask is None or mask & (1 << (signum - 1)) for mask in masks)
+
+
+def hold(pids):
+    """Stop ``pids`` (SIGSTOP: they keep their state and resume where they were)."""
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGSTOP)
+
+
+def release(pids):
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGCONT)
+
+
 def interrupt(out, ray_folder, signum, address=None):
-    """Run the sweep in a driver process of its own; once one setting's run finished and
-    the other's saved an episode, start a second sweep into the same directory (in this
-    process), then send ``signum`` to the driver. What is on disk at each step."""
+    """Run the sweep in a driver process of its own; once the slow run saved an episode
+    and the quick one finished, start a second sweep into the same directory (in this
+    process), then send ``signum`` to the driver. What is on disk at each step.
+
+    The slow run's process is held (SIGSTOP) from its first saved episode on, and let go
+    (SIGCONT) once the SIGTERM by which its Ray worker stops it is pending: so it is
+    under way when the driver is signalled, whatever the machine's load, and it stops at
+    its next safe point as a running run does."""
     quick, slow = (os.path.join(out, label, "seed-0") for label in (QUICK, SLOW))
     extra = [] if address is None else ["--address", address]
+
+    def slow_run_under_way():
+        """The slow run's processes once it saved an episode; an error if it finished."""
+        record = runs.read_json(os.path.join(slow, runs.RUN_RECORD)) or {}
+        assert record.get("status") != "finished", "the slow run finished before it was held"
+        return episodes(slow) and run_processes(slow)
+
     proc = sweep_process([interrupted(out)[0], *extra, *interrupted(out)[1:]], ray_folder)
+    held = []
     try:
+        held = wait_for(slow_run_under_way, 300, "the slow run to save an episode")
+        hold(held)
         wait_for(lambda: (runs.read_json(os.path.join(quick, runs.RUN_RECORD)) or {})
-                 .get("status") == "finished" and episodes(slow), 300,
-                 "one run finished and the other one under way")
+                 .get("status") == "finished", 300, "the quick run to finish")
         files_before = {path: os.stat(path).st_mtime_ns
                         for path in (os.path.join(quick, "summary.json"),
                                      os.path.join(slow, runs.RUN_RECORD))}
@@ -471,8 +516,13 @@ def interrupt(out, ray_folder, signum, address=None):
                   "files": {path: os.stat(path).st_mtime_ns for path in files_before}}
         saved, running = episodes(slow), run_processes(slow)
         proc.send_signal(signum)
+        # the worker gives the run a few seconds to stop before it kills it: let go at once
+        wait_for(lambda: stopping(held, signal.SIGTERM), 60,
+                 "the driver's cancellation to reach the slow run")
+        release(held)
         _, stderr = proc.communicate(timeout=120)
     finally:
+        release(held)
         if proc.poll() is None:
             proc.kill()
             proc.communicate()

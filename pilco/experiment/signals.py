@@ -13,6 +13,8 @@ import contextlib
 import signal
 from typing import Iterator, Optional
 
+from ..runtime import signal_handler
+
 __all__ = ["sigterm_as_keyboard_interrupt", "stop_requested", "raise_if_stop_requested",
            "interrupts_deferred", "signal_handler"]
 
@@ -55,21 +57,6 @@ def sigterm_as_keyboard_interrupt() -> Iterator[None]:
     finally:
         signal.signal(signal.SIGTERM, previous)
         _stop_signal = None
-
-
-@contextlib.contextmanager
-def signal_handler(signum: int, handler) -> Iterator[None]:
-    """Within the block, ``handler`` handles ``signum``; the previous handler is restored
-    afterwards. Only the main thread can install handlers; elsewhere this does nothing."""
-    try:
-        previous = signal.signal(signum, handler)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signum, previous)
 
 
 def interrupts_deferred():

@@ -37,9 +37,10 @@ import time
 
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
-from pilco.experiment.signals import signal_handler
+# nothing here imports TensorFlow (pilco.experiment would): each Ray worker imports this
+# module for its task, and only starts and watches a run's process
 from pilco.files import write_json_atomic
-from pilco.runtime import XLA_CACHE_VARIABLE, thread_environment
+from pilco.runtime import XLA_CACHE_VARIABLE, signal_handler, thread_environment
 
 __all__ = ["RunSpec", "RunFailed", "SweepOutcome", "SUMMARY", "RUN_RECORD", "ATTEMPTS",
            "PROGRESS", "read_json", "summary_complete", "finished_summary", "saved_episodes",
