@@ -26,7 +26,9 @@ from .seeding import generator
 from .validation import (
     as_2d_float,
     check_callable,
+    check_entries,
     check_gaussian,
+    check_indices,
     check_matrix,
     check_max_action,
     check_non_negative_float,
@@ -244,21 +246,15 @@ class StartDraw:
 
     def __init__(self, mean, std: float, lengthscales, angle_indices=(),
                  target_std: float = 0.1):
-        self.mean = np.asarray(mean, dtype=np.float64).reshape(-1)
-        if not np.all(np.isfinite(self.mean)):
-            raise ValueError(f"mean must be finite, got {self.mean}")
+        self.mean = check_state_row(mean, int(np.size(mean)), "mean")[0]
         self.std = check_non_negative_float(std, "std")
         self.target_std = check_non_negative_float(target_std, "target_std")
-        self.angle_indices = [int(i) for i in angle_indices]
-        bad = [i for i in self.angle_indices if not 0 <= i < self.mean.size]
-        if bad:
-            raise ValueError(f"angle_indices {bad} are not indices of a state of "
-                             f"{self.mean.size} dimensions")
-        self.lengthscales = np.asarray(lengthscales, dtype=np.float64).reshape(-1)
-        if self.lengthscales.size != self.mean.size + len(self.angle_indices) or \
-                not np.all(self.lengthscales > 0):
-            raise ValueError(f"lengthscales must be {self.mean.size + len(self.angle_indices)} "
-                             f"positive numbers (one per policy input), got {self.lengthscales}")
+        self.angle_indices = list(check_indices(angle_indices, self.mean.size, "angle_indices"))
+        # one per policy input: the state's dimensions, an angle's as its sine and cosine
+        self.lengthscales = check_entries(lengthscales, self.mean.size + len(self.angle_indices),
+                                          "lengthscales")
+        if not np.all(self.lengthscales > 0):
+            raise ValueError(f"lengthscales must be positive, got {self.lengthscales}")
 
     def __call__(self, controller: "RbfController", seed: Optional[int]) -> None:
         from .features import angle_features

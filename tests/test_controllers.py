@@ -61,10 +61,15 @@ def test_a_start_draw_is_place_near_with_its_lengthscales_and_refuses_bad_settin
                                rtol=1e-12)
     assert StartDraw.from_dict(draw.to_dict()) == draw
     assert StartDraw.from_dict({**draw.to_dict(), "std": 0.3}) != draw
-    with pytest.raises(ValueError, match="lengthscales must be 4 positive"):
+    with pytest.raises(ValueError, match="lengthscales must have 4 entries, got 3"):
         StartDraw([0.0, 1.0, 0.0], 0.2, [1.0, 1.0, 1.0], angle_indices=[1])
-    with pytest.raises(ValueError, match="angle_indices \\[3\\]"):
+    with pytest.raises(ValueError, match="lengthscales must be positive"):
+        StartDraw([0.0, 1.0, 0.0], 0.2, [1.0, 1.0, 0.0, 1.0], angle_indices=[1])
+    with pytest.raises(ValueError, match="angle_indices: index 3 is outside the state "
+                                         "\\(dimension 3\\)"):
         StartDraw([0.0, 1.0, 0.0], 0.2, [1.0] * 4, angle_indices=[3])
+    with pytest.raises(ValueError, match="mean"):
+        StartDraw([0.0, np.nan, 0.0], 0.2, [1.0] * 3)
     with pytest.raises(ValueError, match="std"):
         StartDraw([0.0], -1.0, [1.0])
     with pytest.raises(ValueError, match="this draw has 4 policy inputs, the controller 3"):
