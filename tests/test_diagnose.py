@@ -3,6 +3,8 @@ on a tiny real run (a point on a line, a real PILCO agent), the verdict rules on
 numbers, and the distance a saturating cost measures."""
 from __future__ import annotations
 
+import copy
+import dataclasses
 import json
 import math
 
@@ -146,8 +148,6 @@ def test_each_optimiser_candidate_is_one_search_from_its_own_start(run_dir):
     """With restarts in the run's settings, a candidate of the optimiser check is still one
     search from its start: the run's restarts would draw the same further policies for
     every candidate, and the best of those would stand for each of them."""
-    import dataclasses
-
     from pilco.diagnose.checks import optimiser_check
 
     exp = reopen(run_dir)
@@ -174,8 +174,6 @@ def test_each_optimiser_candidate_is_one_search_from_its_own_start(run_dir):
 def test_the_report_shows_what_happens_between_its_rows(run_dir):
     """A distance with a period of the rows' spacing (a pole spinning through the top
     every 5 steps) reads as steady at the rows; the ranges between the rows show it."""
-    import copy
-
     result = copy.deepcopy(diagnose(reopen(run_dir), restarts=0))
     multi = result["model"]["multi_step"]
     spin = np.where(np.arange(41) % 5 == 0, 0.07, 0.95)
