@@ -52,6 +52,12 @@ class ExperimentConfig:
             ``policy_restart_from`` in which the restarts still run (0: the same
             ``policy_restarts`` in every one): with ``policy_restart_when="unsolved"``, the
             longer a run stays unsolved, the wider its search.
+        policy_leave_repeat: in an episode whose policy search runs restarts, when the
+            run continued from the last policy wins with a predicted return less than
+            ``policy_leave_repeat`` above the last episode's real return (scaled to the
+            horizon: ``horizon * (1 - cost / steps)``), the best of the fresh runs is
+            used instead: the model already knows the winner's outcome, a failure, and
+            a fresh policy gathers data where the model has none (``None`` or 0: off).
         policy_warm_start: ``"always"``: every policy search starts from the policy of
             the episode before; ``"solved"``: only once an episode was solved; before
             that, each learned episode after the first starts from a fresh random policy
@@ -116,6 +122,7 @@ class ExperimentConfig:
     policy_restart_when: str = "always"
     policy_restart_from: int = 1
     policy_restart_step: int = 0
+    policy_leave_repeat: Optional[float] = None
     policy_warm_start: str = "always"
     policy_start_mixture: Optional[float] = None
     policy_start_mixture_when: str = "solved"
@@ -169,7 +176,8 @@ class ExperimentConfig:
                 or not self.policy_fragile_gap >= 0):
             raise ValueError(f"policy_fragile_gap must be a number >= 0, got "
                              f"{self.policy_fragile_gap!r}")
-        for name in ("policy_start_mixture", "policy_flank_points", "policy_start_scale"):
+        for name in ("policy_start_mixture", "policy_flank_points", "policy_start_scale",
+                     "policy_leave_repeat"):
             value = getattr(self, name)
             if value == 0:
                 setattr(self, name, None)

@@ -72,6 +72,8 @@ def improve_policy(exp, number: int, runs: Optional[int] = None) -> float:
         return search_policy(exp, number, what, runs)
 
     expected = search("policy", restarts)
+    if restarts > 1 and cfg.policy_leave_repeat is not None:
+        expected = _unless_repeating(exp, number, expected)
     check = cfg.fragile_check_at(solved)
     if check is not None:
         expected = _unless_fragile(exp, number, check, expected, search)
@@ -116,6 +118,33 @@ def search_policy(exp, number: int, what: str = "policy", runs: int = 1) -> floa
             callback=optimizer_callback(bar), method=cfg.policy_method,
             min_rel_improvement=cfg.policy_early_stop_at(solved),
             patience=cfg.policy_patience, **compiler)
+
+
+def _unless_repeating(exp, number: int, expected: float) -> float:
+    """After a search with restarts: when its run continued from the last policy won with
+    a predicted return less than ``policy_leave_repeat`` above what the last episode
+    really returned (``horizon * (1 - cost / steps)``), the model predicts the episode to
+    repeat an outcome it has already seen, and running it teaches the model nothing; the
+    best of the fresh runs is used instead. Notes the choice in ``exp.policy_notes``;
+    returns the predicted return of the policy left in place."""
+    agent, last = exp.agent, exp.records[-1]
+    returns = agent.policy_run_returns
+    if len(returns) < 2 or int(np.argmax(returns)) != 0:
+        return expected
+    real = agent.horizon * (1.0 - last["cost"] / max(1, last["steps"]))
+    if returns[0] >= real + exp.config.policy_leave_repeat:
+        return expected
+    fresh = 1 + int(np.argmax(returns[1:]))
+    if not np.isfinite(returns[fresh]):
+        return expected
+    chosen = agent.use_policy_run(fresh)
+    logger.info("episode %d: the search continued from the last policy predicts %.3f, "
+                "the last episode returned %.3f: a known outcome; running fresh search "
+                "%d instead (predicted %.3f)", number, returns[0], real, fresh, chosen)
+    exp.policy_notes["left_repeat"] = {"continued_return": float(returns[0]),
+                                       "last_real_return": float(real),
+                                       "fresh_run": fresh, "fresh_return": float(chosen)}
+    return chosen
 
 
 def _unless_fragile(exp, number: int, spread: float, plain: float, search) -> float:

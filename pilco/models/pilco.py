@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Callable, Optional, Sequence
+from typing import Callable, List, Optional, Sequence
 
 import gpflow
 import numpy as np
@@ -584,6 +584,30 @@ class PILCO(gpflow.base.Module):
         restarts; 0 before the first)."""
         last = getattr(self, "_last_search", None)
         return 0 if last is None else int(last.evaluations)
+
+    @property
+    def policy_run_returns(self) -> List[float]:
+        """The best expected return of each run of the last :meth:`optimize_policy`, in
+        order (run 0 started from the policy in place, the others from
+        ``controller.randomize``); ``-inf`` for a run without a finite evaluation; empty
+        before the first search."""
+        last = getattr(self, "_last_search", None)
+        return [] if last is None else [-float(loss) for loss, _ in last.runs]
+
+    def use_policy_run(self, run: int) -> float:
+        """Put the best policy of run ``run`` (an index into :attr:`policy_run_returns`)
+        of the last :meth:`optimize_policy` in place of the policy it left; returns that
+        run's expected return. A ``ValueError`` if there is no such run or it evaluated no
+        finite point."""
+        returns = self.policy_run_returns
+        if isinstance(run, bool) or not isinstance(run, (int, np.integer)) \
+                or not 0 <= run < len(returns):
+            raise ValueError(f"run must be an index into the last policy search's "
+                             f"{len(returns)} run(s), got {run!r}")
+        if not np.isfinite(returns[run]):
+            raise ValueError(f"policy search run {run} evaluated no finite point")
+        self._last_search.restore_run_best(self.controller.trainable_variables, int(run))
+        return returns[run]
 
     # -- acting -----------------------------------------------------------------------------
     @checked_arguments(_check_measured_states)

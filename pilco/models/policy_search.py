@@ -39,13 +39,20 @@ class GuardedScipy(TrackingScipy):
         self.reset()
 
     def reset(self):
-        """Forget the failures and the best point of earlier runs."""
+        """Forget the failures and the best points of earlier runs."""
         self.failures = 0
         self.evaluations = 0
         self.first_loss = None
         self.best_loss = np.inf
         self.best_x = None
-        self.start_run()
+        #: per run since the reset: ``[best loss, best point]`` (``[inf, None]`` if none)
+        self.runs: List[list] = []
+        TrackingScipy.start_run(self)
+
+    def start_run(self) -> None:
+        """Begin a new run: its best point is tracked on its own (``runs[-1]``)."""
+        super().start_run()
+        self.runs.append([np.inf, None])
 
     def eval_func(self, closure, variables, tf_fun_args, compile=True,
                   allow_unused_variables=False):
@@ -71,6 +78,8 @@ class GuardedScipy(TrackingScipy):
             if loss < self.best_loss:
                 self.best_loss = float(loss)
                 self.best_x = np.array(x, dtype=np.float64, copy=True)
+            if self.runs and loss < self.runs[-1][0]:
+                self.runs[-1] = [float(loss), np.array(x, dtype=np.float64, copy=True)]
             return loss, grad
 
         return guarded
@@ -86,9 +95,17 @@ class GuardedScipy(TrackingScipy):
 
     def restore_best(self, variables) -> bool:
         """Assign the best point evaluated so far to ``variables``; False if there is none."""
-        if self.best_x is None:
+        return self._assign(variables, self.best_x)
+
+    def restore_run_best(self, variables, run: int) -> bool:
+        """Assign the best point of run ``run`` (0-based, since the last :meth:`reset`) to
+        ``variables``; False if that run evaluated no finite point."""
+        return self._assign(variables, self.runs[run][1])
+
+    def _assign(self, variables, x) -> bool:
+        if x is None:
             return False
-        values = self.unpack_tensors(variables, tf.constant(self.best_x))
+        values = self.unpack_tensors(variables, tf.constant(x))
         self.assign_tensors(variables, values)
         return True
 

@@ -125,6 +125,7 @@ class Task:
             policy_restart_when=s.policy_restart_when,
             policy_restart_from=s.policy_restart_from,
             policy_restart_step=s.policy_restart_step,
+            policy_leave_repeat=s.policy_leave_repeat,
             policy_warm_start=s.policy_warm_start, policy_iters_first=s.policy_iters_first,
             policy_start_mixture=s.policy_start_mixture,
             policy_start_mixture_when=s.policy_start_mixture_when,
