@@ -594,3 +594,67 @@ def test_a_watch_sees_the_states_and_its_pause_counts_as_policy_time(tmp_path):
     assert "paused_seconds" not in exp.records[-1]
     exp.run_learned_episode()  # no watch: the agent's own policy
     assert len(seen) == episode.steps
+
+
+class RepeatingAgent(StandInAgent):
+    """A stand-in agent whose policy search reports per-run returns set by the test,
+    relative to the last episode's real return (``offsets``), and records the run put in
+    place."""
+
+    offsets = (0.5, -3.0)
+
+    def __init__(self, data, **kw):
+        super().__init__(data, **kw)
+        self.used = []
+        self.policy_run_returns = []
+        self.last_real = None
+
+    def optimize_policy(self, maxiter, restarts, seed, callback, method, min_rel_improvement,
+                        patience):
+        super().optimize_policy(maxiter, restarts, seed, callback, method,
+                                min_rel_improvement, patience)
+        self.policy_run_returns = [self.last_real + o for o in self.offsets[:restarts]]
+        return max(self.policy_run_returns)
+
+    def use_policy_run(self, run):
+        self.used.append(run)
+        return self.policy_run_returns[run]
+
+
+@pytest.mark.parametrize("offsets, leave, used", [
+    ((0.5, -3.0), 1.0, [1]),     # the continued run wins but only repeats: the fresh one
+    ((2.0, -3.0), 1.0, []),      # the continued run promises more than the last episode
+    ((0.5, 1.0), 1.0, []),       # a fresh run wins anyway
+    ((0.5, -3.0), None, []),     # off
+])
+def test_a_search_that_would_repeat_a_known_outcome_runs_a_fresh_policy(tmp_path, offsets,
+                                                                        leave, used):
+    """``policy_leave_repeat``: when the run continued from the last policy wins with a
+    predicted return less than the setting above the last episode's real return
+    (``horizon * (1 - cost / steps)``), the best fresh run is put in place and noted."""
+    RepeatingAgent.offsets = offsets
+    exp, _ = experiment(tmp_path, config(policy_restarts=2, policy_leave_repeat=leave))
+    agents = []
+
+    def build(data, start_states):  # noqa: ARG001
+        agents.append(RepeatingAgent(data))
+        return agents[-1]
+
+    exp.build_agent = build
+    exp.run_random_episode()
+    agent = agents[0]
+    last = exp.records[-1]
+    agent.last_real = agent.horizon * (1.0 - last["cost"] / last["steps"])
+    record = exp.run_learned_episode()
+    assert agent.policy_restarts == [2]
+    assert agent.used == used
+    if used:
+        note = record["left_repeat"]
+        assert note["fresh_run"] == 1
+        assert np.isclose(note["continued_return"], agent.last_real + offsets[0])
+        assert np.isclose(note["last_real_return"], agent.last_real)
+        assert np.isclose(note["fresh_return"], agent.last_real + offsets[1])
+    else:
+        assert "left_repeat" not in record
+    with pytest.raises(ValueError, match="policy_leave_repeat must be a number >= 0"):
+        config(policy_leave_repeat=-1.0)

@@ -180,3 +180,29 @@ def test_a_randomizer_that_is_not_a_start_draw_is_not_saved(agent, tmp_path, cap
     assert caplog.text.count("is not saved") == 1
     assert PILCO.load(str(tmp_path / "agent.npz")).controller.randomizer is None
 
+
+
+def test_each_runs_best_return_is_kept_and_can_be_put_in_place(agent):
+    """``policy_run_returns`` lists each run's best expected return (the best of them is
+    what the search returned); ``use_policy_run(r)`` puts run r's best policy in place,
+    and the model then predicts exactly that return for it."""
+    best = agent.optimize_policy(maxiter=5, restarts=3, seed=4)
+    returns = agent.policy_run_returns
+    assert len(returns) == 3
+    assert np.isclose(max(returns), best, rtol=1e-12)
+    left = parameters(agent)
+    for run in range(3):
+        assert np.isclose(agent.use_policy_run(run), returns[run], rtol=1e-12)
+        assert np.isclose(agent.expected_return(), returns[run], rtol=1e-9)
+    winner = int(np.argmax(returns))
+    agent.use_policy_run(winner)
+    for v, value in zip(parameters(agent), left):
+        np.testing.assert_allclose(v, value, rtol=1e-12)
+
+
+def test_use_policy_run_rejects_runs_that_do_not_exist(agent):
+    agent.optimize_policy(maxiter=2, restarts=2, seed=1)
+    for bad in (2, -1, True, 1.0, "0"):
+        with pytest.raises(ValueError, match="run must be an index into the last policy "
+                                             "search's 2 run"):
+            agent.use_policy_run(bad)

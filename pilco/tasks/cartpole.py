@@ -22,6 +22,15 @@ it gets (a policy with centres drawn from N(0, I) often starts where the cost is
 never moves; ``--policy-init random`` draws so). A run solved sooner never restarts, so
 it costs and learns exactly as without them (``--policy-restarts 1`` turns them off).
 
+A stuck run's restarts rarely beat its warm start on the model: a run that spins the
+pole through the top from its first learned episode on has a model that knows the spin
+well and has no data of the pole moving slowly near the top, so every policy that would
+hold it is predicted worse than the spin. So when the search continued from the last
+policy wins but predicts less than one step of reward more than the last episode really
+returned (``--policy-leave-repeat 1``), the episode runs the best of the fresh searches
+instead: the model already knows the warm start's outcome, a failure, and a fresh policy
+collects data where it has none (``--policy-leave-repeat 0`` turns this off).
+
 Once an episode was solved, the policy objective is the mean of the expected returns from
 the start distribution and from one twice as wide (``--policy-start-scale 2``, each
 propagated as one moment-matched Gaussian; 0 turns it off). The release's objective
@@ -64,7 +73,7 @@ __all__ = ["CartPoleSettings", "CartPoleTask", "CARTPOLE", "init_policy_from_sta
                model_iters=300, output="runs/cartpole-seed{seed}", policy_optimizer="BFGS",
                policy_min_rel_improvement=0.003, model_min_rel_improvement=5e-4,
                policy_restarts=2, policy_restart_when="unsolved", policy_restart_from=5,
-               policy_restart_step=1, policy_start_scale=2.0)
+               policy_restart_step=1, policy_leave_repeat=1.0, policy_start_scale=2.0)
 class CartPoleSettings(RunSettings):
     """The cart-pole's settings (the MATLAB release's defaults)."""
 
