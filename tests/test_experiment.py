@@ -624,13 +624,15 @@ class RepeatingAgent(StandInAgent):
 @pytest.mark.parametrize("offsets, leave, used", [
     ((0.5, -3.0), 1.0, [1]),     # the continued run wins but only repeats: the fresh one
     ((2.0, -3.0), 1.0, []),      # the continued run promises more than the last episode
+    ((-0.5, -3.0), 1.0, [1]),    # ... or a little less: the same outcome
+    ((-2.0, -3.0), 1.0, []),     # ... much less: the model does not reproduce the last one
     ((0.5, 1.0), 1.0, []),       # a fresh run wins anyway
     ((0.5, -3.0), None, []),     # off
 ])
 def test_a_search_that_would_repeat_a_known_outcome_runs_a_fresh_policy(tmp_path, offsets,
                                                                         leave, used):
     """``policy_leave_repeat``: when the run continued from the last policy wins with a
-    predicted return less than the setting above the last episode's real return
+    predicted return within the setting of the last episode's real return
     (``horizon * (1 - cost / steps)``), the best fresh run is put in place and noted."""
     RepeatingAgent.offsets = offsets
     exp, _ = experiment(tmp_path, config(policy_restarts=2, policy_leave_repeat=leave))

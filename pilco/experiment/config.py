@@ -53,8 +53,8 @@ class ExperimentConfig:
             ``policy_restarts`` in every one): with ``policy_restart_when="unsolved"``, the
             longer a run stays unsolved, the wider its search.
         policy_leave_repeat: in an episode whose policy search runs restarts, when the
-            run continued from the last policy wins with a predicted return less than
-            ``policy_leave_repeat`` above the last episode's real return (scaled to the
+            run continued from the last policy wins with a predicted return within
+            ``policy_leave_repeat`` of the last episode's real return (scaled to the
             horizon: ``horizon * (1 - cost / steps)``), the best of the fresh runs is
             used instead: the model already knows the winner's outcome, a failure, and
             a fresh policy gathers data where the model has none (``None`` or 0: off).

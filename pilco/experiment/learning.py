@@ -122,17 +122,19 @@ def search_policy(exp, number: int, what: str = "policy", runs: int = 1) -> floa
 
 def _unless_repeating(exp, number: int, expected: float) -> float:
     """After a search with restarts: when its run continued from the last policy won with
-    a predicted return less than ``policy_leave_repeat`` above what the last episode
-    really returned (``horizon * (1 - cost / steps)``), the model predicts the episode to
-    repeat an outcome it has already seen, and running it teaches the model nothing; the
-    best of the fresh runs is used instead. Notes the choice in ``exp.policy_notes``;
+    a predicted return within ``policy_leave_repeat`` of what the last episode really
+    returned (``horizon * (1 - cost / steps)``), the model predicts the episode to repeat
+    an outcome it has already seen, and running it teaches the model nothing; the best
+    of the fresh runs is used instead. Notes the choice in ``exp.policy_notes``;
     returns the predicted return of the policy left in place."""
     agent, last = exp.agent, exp.records[-1]
     returns = agent.policy_run_returns
     if len(returns) < 2 or int(np.argmax(returns)) != 0:
         return expected
     real = agent.horizon * (1.0 - last["cost"] / max(1, last["steps"]))
-    if returns[0] >= real + exp.config.policy_leave_repeat:
+    if abs(returns[0] - real) >= exp.config.policy_leave_repeat:
+        # the model expects more (the search found an improvement) or less (it does not
+        # reproduce the last episode's outcome) than what the last episode got
         return expected
     fresh = 1 + int(np.argmax(returns[1:]))
     if not np.isfinite(returns[fresh]):

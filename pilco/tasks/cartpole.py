@@ -26,8 +26,8 @@ A stuck run's restarts rarely beat its warm start on the model: a run that spins
 pole through the top from its first learned episode on has a model that knows the spin
 well and has no data of the pole moving slowly near the top, so every policy that would
 hold it is predicted worse than the spin. So when the search continued from the last
-policy wins but predicts less than one step of reward more than the last episode really
-returned (``--policy-leave-repeat 1``), the episode runs the best of the fresh searches
+policy wins with a predicted return within one step of reward of what the last episode
+really returned (``--policy-leave-repeat 1``), the episode runs the best of the fresh searches
 instead: the model already knows the warm start's outcome, a failure, and a fresh policy
 collects data where it has none (``--policy-leave-repeat 0`` turns this off).
 
