@@ -660,3 +660,29 @@ def test_a_search_that_would_repeat_a_known_outcome_runs_a_fresh_policy(tmp_path
         assert "left_repeat" not in record
     with pytest.raises(ValueError, match="policy_leave_repeat must be a number >= 0"):
         config(policy_leave_repeat=-1.0)
+
+
+def test_a_solved_run_repeats_its_policy_even_when_the_model_knows_its_outcome(tmp_path):
+    """The rule is for stuck runs: once an episode was solved, repeating its outcome is
+    what is wanted, and the continued run's policy stays (restarts running or not)."""
+    RepeatingAgent.offsets = (0.5, -3.0)
+    exp, _ = experiment(tmp_path, config(policy_restarts=2, policy_leave_repeat=1.0))
+    agents = []
+
+    def build(data, start_states):  # noqa: ARG001
+        agents.append(RepeatingAgent(data))
+        return agents[-1]
+
+    exp.build_agent = build
+    exp.run_random_episode()
+    agent = agents[0]
+    agent.gain = 0.6  # the stand-in's policy solves the line task
+    last = exp.records[-1]
+    agent.last_real = agent.horizon * (1.0 - last["cost"] / last["steps"])
+    exp.run_learned_episode()
+    assert exp.solved_at_episode() == 2 and agent.used == [1]  # unsolved before it
+    last = exp.records[-1]
+    agent.last_real = agent.horizon * (1.0 - last["cost"] / last["steps"])
+    record = exp.run_learned_episode()
+    assert agent.policy_restarts == [2, 2] and agent.used == [1]
+    assert "left_repeat" not in record

@@ -52,8 +52,8 @@ class ExperimentConfig:
             ``policy_restart_from`` in which the restarts still run (0: the same
             ``policy_restarts`` in every one): with ``policy_restart_when="unsolved"``, the
             longer a run stays unsolved, the wider its search.
-        policy_leave_repeat: in an episode whose policy search runs restarts, when the
-            run continued from the last policy wins with a predicted return within
+        policy_leave_repeat: while no episode was solved, in an episode whose policy
+            search runs restarts, when the run continued from the last policy wins with a predicted return within
             ``policy_leave_repeat`` of the last episode's real return (scaled to the
             horizon: ``horizon * (1 - cost / steps)``), the best of the fresh runs is
             used instead: the model already knows the winner's outcome, a failure, and

@@ -72,7 +72,7 @@ def improve_policy(exp, number: int, runs: Optional[int] = None) -> float:
         return search_policy(exp, number, what, runs)
 
     expected = search("policy", restarts)
-    if restarts > 1 and cfg.policy_leave_repeat is not None:
+    if restarts > 1 and cfg.policy_leave_repeat is not None and not solved:
         expected = _unless_repeating(exp, number, expected)
     check = cfg.fragile_check_at(solved)
     if check is not None:
@@ -121,11 +121,12 @@ def search_policy(exp, number: int, what: str = "policy", runs: int = 1) -> floa
 
 
 def _unless_repeating(exp, number: int, expected: float) -> float:
-    """After a search with restarts: when its run continued from the last policy won with
-    a predicted return within ``policy_leave_repeat`` of what the last episode really
-    returned (``horizon * (1 - cost / steps)``), the model predicts the episode to repeat
-    an outcome it has already seen, and running it teaches the model nothing; the best
-    of the fresh runs is used instead. Notes the choice in ``exp.policy_notes``;
+    """After a search with restarts in a run not yet solved (so the last episode failed):
+    when its run continued from the last policy won with a predicted return within
+    ``policy_leave_repeat`` of what the last episode really returned (``horizon * (1 -
+    cost / steps)``), the model predicts the episode to repeat a failure it has already
+    seen, and running it teaches the model nothing; the best of the fresh runs is used
+    instead. Notes the choice in ``exp.policy_notes``;
     returns the predicted return of the policy left in place."""
     agent, last = exp.agent, exp.records[-1]
     returns = agent.policy_run_returns

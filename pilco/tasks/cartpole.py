@@ -27,9 +27,9 @@ pole through the top from its first learned episode on has a model that knows th
 well and has no data of the pole moving slowly near the top, so every policy that would
 hold it is predicted worse than the spin. So when the search continued from the last
 policy wins with a predicted return within one step of reward of what the last episode
-really returned (``--policy-leave-repeat 1``), the episode runs the best of the fresh searches
-instead: the model already knows the warm start's outcome, a failure, and a fresh policy
-collects data where it has none (``--policy-leave-repeat 0`` turns this off).
+really returned (``--policy-leave-repeat 1``), the episode runs the best of the fresh
+searches instead: the model already knows the warm start's outcome, a failure, and a
+fresh policy collects data where it has none (``--policy-leave-repeat 0`` turns this off).
 
 Once an episode was solved, the policy objective is the mean of the expected returns from
 the start distribution and from one twice as wide (``--policy-start-scale 2``, each

@@ -212,10 +212,11 @@ class RunSettings:
         0, "the same with this many known states drawn from the start distribution (drawn "
         "again in every episode; 0: off)", kind=non_negative_int, group="learning")
     policy_leave_repeat: Optional[float] = setting(
-        None, "in an episode whose policy search runs restarts: when the search continued "
-        "from the last policy wins but its policy is predicted to return within this much "
-        "of what the last episode really did (a failure the model already knows), run the "
-        "best of the fresh searches instead (0: off; returns summed over the horizon)", kind=non_negative_float, group="learning", unset="off")
+        None, "while no episode was solved, in an episode whose policy search runs "
+        "restarts: when the search continued from the last policy wins but is predicted to "
+        "return within this much of what the last episode really did (a failure the model "
+        "already knows), run the best of the fresh searches instead (0: off; returns "
+        "summed over the horizon)", kind=non_negative_float, group="learning", unset="off")
     policy_start_scale: Optional[float] = setting(
         None, "beside the policy objective's start distribution, propagate one this many "
         "times as wide (its standard deviations) and average their expected returns, so "
