@@ -86,12 +86,15 @@ def config(**kw):
     return ExperimentConfig(**base)
 
 
-def experiment(tmp_path, cfg=None, agents=None, agent_kw=None, **kw):
+def experiment(tmp_path, cfg=None, agents=None, agent_kw=None, agent_class=None, **kw):
+    """An experiment on the line task whose agents (``agent_class``, by default
+    :class:`StandInAgent`) are appended to ``agents`` as it builds them."""
     agents = [] if agents is None else agents
+    agent_class = agent_class or StandInAgent
 
     def build(data, start_states):
         assert start_states.shape[1] == 1 and len(start_states) >= cfg_.random_episodes
-        agents.append(StandInAgent(data, **(agent_kw or {})))
+        agents.append(agent_class(data, **(agent_kw or {})))
         return agents[-1]
 
     cfg_ = cfg or config()
@@ -490,15 +493,9 @@ class MixtureAgent(StandInAgent):
 @pytest.mark.parametrize("gap, searched", [(2.0, True), (0.5, False)])
 def test_a_fragile_policy_is_searched_again_on_the_start_mixture(tmp_path, gap, searched):
     MixtureAgent.gap = gap
-    exp, _ = experiment(tmp_path, config(policy_start_mixture=1.5,
-                                         policy_start_mixture_when="fragile"))
-    agents = []
-
-    def build(data, start_states):  # noqa: ARG001
-        agents.append(MixtureAgent(data))
-        return agents[-1]
-
-    exp.build_agent = build
+    exp, agents = experiment(tmp_path, config(policy_start_mixture=1.5,
+                                              policy_start_mixture_when="fragile"),
+                             agent_class=MixtureAgent)
     exp.run_random_episode()
     agent = agents[0]
     agent.gain = 0.6
@@ -538,16 +535,10 @@ def test_start_points_and_wide_start_are_switched_on_once_solved(tmp_path, when)
     """The flank points, samples and wide start of the config reach the agent's policy
     searches from the first one after a solved episode (``"solved"``) or from the first
     (``"always"``); the samples are drawn again in every episode."""
-    exp, _ = experiment(tmp_path, config(policy_flank_points=1.5, policy_start_samples=3,
-                                         policy_start_scale=2.0,
-                                         policy_start_points_when=when))
-    agents = []
-
-    def build(data, start_states):  # noqa: ARG001
-        agents.append(WideStartAgent(data))
-        return agents[-1]
-
-    exp.build_agent = build
+    exp, agents = experiment(tmp_path, config(policy_flank_points=1.5,
+                                              policy_start_samples=3, policy_start_scale=2.0,
+                                              policy_start_points_when=when),
+                             agent_class=WideStartAgent)
     exp.run_random_episode()
     agent = agents[0]
     agent.gain = 0.6
@@ -596,6 +587,12 @@ def test_a_watch_sees_the_states_and_its_pause_counts_as_policy_time(tmp_path):
     assert len(seen) == episode.steps
 
 
+def last_real_return(exp, agent):
+    """The last episode's real return on the agent's horizon, as the rule computes it."""
+    last = exp.records[-1]
+    return agent.horizon * (1.0 - last["cost"] / last["steps"])
+
+
 class RepeatingAgent(StandInAgent):
     """A stand-in agent whose policy search reports per-run returns set by the test,
     relative to the last episode's real return (``offsets``), and records the run put in
@@ -635,18 +632,11 @@ def test_a_search_that_would_repeat_a_known_outcome_runs_a_fresh_policy(tmp_path
     predicted return within the setting of the last episode's real return
     (``horizon * (1 - cost / steps)``), the best fresh run is put in place and noted."""
     RepeatingAgent.offsets = offsets
-    exp, _ = experiment(tmp_path, config(policy_restarts=2, policy_leave_repeat=leave))
-    agents = []
-
-    def build(data, start_states):  # noqa: ARG001
-        agents.append(RepeatingAgent(data))
-        return agents[-1]
-
-    exp.build_agent = build
+    exp, agents = experiment(tmp_path, config(policy_restarts=2, policy_leave_repeat=leave),
+                             agent_class=RepeatingAgent)
     exp.run_random_episode()
     agent = agents[0]
-    last = exp.records[-1]
-    agent.last_real = agent.horizon * (1.0 - last["cost"] / last["steps"])
+    agent.last_real = last_real_return(exp, agent)
     record = exp.run_learned_episode()
     assert agent.policy_restarts == [2]
     assert agent.used == used
@@ -666,23 +656,15 @@ def test_a_solved_run_repeats_its_policy_even_when_the_model_knows_its_outcome(t
     """The rule is for stuck runs: once an episode was solved, repeating its outcome is
     what is wanted, and the continued run's policy stays (restarts running or not)."""
     RepeatingAgent.offsets = (0.5, -3.0)
-    exp, _ = experiment(tmp_path, config(policy_restarts=2, policy_leave_repeat=1.0))
-    agents = []
-
-    def build(data, start_states):  # noqa: ARG001
-        agents.append(RepeatingAgent(data))
-        return agents[-1]
-
-    exp.build_agent = build
+    exp, agents = experiment(tmp_path, config(policy_restarts=2, policy_leave_repeat=1.0),
+                             agent_class=RepeatingAgent)
     exp.run_random_episode()
     agent = agents[0]
     agent.gain = 0.6  # the stand-in's policy solves the line task
-    last = exp.records[-1]
-    agent.last_real = agent.horizon * (1.0 - last["cost"] / last["steps"])
+    agent.last_real = last_real_return(exp, agent)
     exp.run_learned_episode()
     assert exp.solved_at_episode() == 2 and agent.used == [1]  # unsolved before it
-    last = exp.records[-1]
-    agent.last_real = agent.horizon * (1.0 - last["cost"] / last["steps"])
+    agent.last_real = last_real_return(exp, agent)
     record = exp.run_learned_episode()
     assert agent.policy_restarts == [2, 2] and agent.used == [1]
     assert "left_repeat" not in record

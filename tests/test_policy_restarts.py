@@ -181,7 +181,6 @@ def test_a_randomizer_that_is_not_a_start_draw_is_not_saved(agent, tmp_path, cap
     assert PILCO.load(str(tmp_path / "agent.npz")).controller.randomizer is None
 
 
-
 def test_each_runs_best_return_is_kept_and_can_be_put_in_place(agent):
     """``policy_run_returns`` lists each run's best expected return (the best of them is
     what the search returned); ``use_policy_run(r)`` puts run r's best policy in place,

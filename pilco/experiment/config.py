@@ -53,11 +53,12 @@ class ExperimentConfig:
             ``policy_restarts`` in every one): with ``policy_restart_when="unsolved"``, the
             longer a run stays unsolved, the wider its search.
         policy_leave_repeat: while no episode was solved, in an episode whose policy
-            search runs restarts, when the run continued from the last policy wins with a predicted return within
-            ``policy_leave_repeat`` of the last episode's real return (scaled to the
-            horizon: ``horizon * (1 - cost / steps)``), the best of the fresh runs is
-            used instead: the model already knows the winner's outcome, a failure, and
-            a fresh policy gathers data where the model has none (``None`` or 0: off).
+            search runs restarts, when the run continued from the last policy wins with a
+            predicted return within ``policy_leave_repeat`` of the last episode's real
+            return (scaled to the horizon: ``horizon * (1 - cost / steps)``), the best of
+            the fresh runs is used instead: the model already knows the winner's outcome,
+            a failure, and a fresh policy gathers data where the model has none (``None``
+            or 0: off).
         policy_warm_start: ``"always"``: every policy search starts from the policy of
             the episode before; ``"solved"``: only once an episode was solved; before
             that, each learned episode after the first starts from a fresh random policy

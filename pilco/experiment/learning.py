@@ -126,8 +126,8 @@ def _unless_repeating(exp, number: int, expected: float) -> float:
     ``policy_leave_repeat`` of what the last episode really returned (``horizon * (1 -
     cost / steps)``), the model predicts the episode to repeat a failure it has already
     seen, and running it teaches the model nothing; the best of the fresh runs is used
-    instead. Notes the choice in ``exp.policy_notes``;
-    returns the predicted return of the policy left in place."""
+    instead. Notes the choice in ``exp.policy_notes``; returns the predicted return of the
+    policy left in place."""
     agent, last = exp.agent, exp.records[-1]
     returns = agent.policy_run_returns
     if len(returns) < 2 or int(np.argmax(returns)) != 0:

@@ -43,11 +43,20 @@ class GuardedScipy(TrackingScipy):
         self.failures = 0
         self.evaluations = 0
         self.first_loss = None
-        self.best_loss = np.inf
-        self.best_x = None
         #: per run since the reset: ``[best loss, best point]`` (``[inf, None]`` if none)
         self.runs: List[list] = []
         TrackingScipy.start_run(self)
+
+    @property
+    def best_loss(self) -> float:
+        """The lowest finite loss evaluated since the reset (``inf`` if none)."""
+        return min((loss for loss, _ in self.runs), default=np.inf)
+
+    @property
+    def best_x(self) -> Optional[np.ndarray]:
+        """The point of :attr:`best_loss` (the earliest run's on a tie; None if none)."""
+        losses = [loss for loss, _ in self.runs]
+        return self.runs[int(np.argmin(losses))][1] if losses else None
 
     def start_run(self) -> None:
         """Begin a new run: its best point is tracked on its own (``runs[-1]``)."""
@@ -75,10 +84,9 @@ class GuardedScipy(TrackingScipy):
                 return self.PENALTY, np.zeros_like(x)
             if self.first_loss is None:
                 self.first_loss = float(loss)
-            if loss < self.best_loss:
-                self.best_loss = float(loss)
-                self.best_x = np.array(x, dtype=np.float64, copy=True)
-            if self.runs and loss < self.runs[-1][0]:
+            if not self.runs:  # evaluated without start_run: one run since the reset
+                self.runs.append([np.inf, None])
+            if loss < self.runs[-1][0]:
                 self.runs[-1] = [float(loss), np.array(x, dtype=np.float64, copy=True)]
             return loss, grad
 
