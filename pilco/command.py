@@ -48,13 +48,16 @@ def _task_names() -> List[str]:
 
 
 def _pick(argv: List[str], choices: Sequence[str], usage: str, prog: str,
-          what: str) -> Optional[int]:
-    """The exit status when ``argv`` does not start with one of ``choices``: 0 after
-    printing ``usage`` for ``-h``/``--help``, 2 after a usage error naming the missing or
-    unknown ``what``; None when it does."""
+          what: str, references: bool = False) -> Optional[int]:
+    """The exit status when ``argv`` does not start with one of ``choices`` (or, with
+    ``references``, a ``module:ATTRIBUTE``): 0 after printing ``usage`` for
+    ``-h``/``--help``, 2 after a usage error naming the missing or unknown ``what``; None
+    when it does."""
     if argv and argv[0] in ("-h", "--help"):
         sys.stdout.write(usage)
         return 0
+    if references and argv and ":" in argv[0]:
+        return None
     if not argv or argv[0] not in choices:
         problem = f"no {what} given" if not argv else f"unknown {what} {argv[0]!r}"
         sys.stderr.write(f"{usage.splitlines()[0]}\n{prog}: error: {problem}; choose one "
@@ -67,13 +70,18 @@ def _run(argv: List[str]) -> int:
     names = _task_names()
     usage = (f"usage: {PROG} run TASK [task flags]\n"
              f"       {PROG} run TASK --help   (the task's flags)\n"
-             f"tasks: {', '.join(names)}\n")
-    status = _pick(argv, names, usage, f"{PROG} run", "task")
+             f"tasks: {', '.join(names)}, or package.module:ATTRIBUTE (a task of your own)\n")
+    status = _pick(argv, names, usage, f"{PROG} run", "task", references=True)
     if status is not None:
         return status
-    from .tasks import run_task
+    from .tasks import get_task
 
-    return run_task(argv[0], argv[1:])
+    try:
+        task = get_task(argv[0])
+    except (ValueError, TypeError) as err:  # a module:ATTRIBUTE that is not a task
+        sys.stderr.write(f"{usage.splitlines()[0]}\n{PROG} run: error: {err}\n")
+        return 2
+    return task.main(argv[1:])
 
 
 def _sweep(argv: List[str]) -> int:

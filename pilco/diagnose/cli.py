@@ -118,7 +118,7 @@ def main(argv: Optional[Sequence[str]] = None, prog: str = PROG) -> int:
     from .reopen import open_run
     from .report import format_report
 
-    from ..tasks import TASKS, get_task
+    from ..tasks import TASKS, get_task, is_task_reference
     from ..tasks.base import RunDirectoryError
 
     try:
@@ -137,7 +137,8 @@ def main(argv: Optional[Sequence[str]] = None, prog: str = PROG) -> int:
                                   f"{', '.join(map(str, learned)) or 'none'})")
     rollouts = not args.no_rollouts
     task = exp.config.task
-    if rollouts and task in TASKS and not get_task(task).system_from_settings:
+    if rollouts and (task in TASKS or is_task_reference(task)) and \
+            not get_task(task).system_from_settings:
         logger.warning("the %s task changes its system during the run: the candidate "
                        "policies are not run on the real system", task)
         rollouts = False

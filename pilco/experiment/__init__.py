@@ -4,7 +4,7 @@ command line shared by the tasks.
 =================  ==============================================================
 module             job
 =================  ==============================================================
-``episode``        :class:`Episode`, :func:`rollout`, :func:`make_env`
+``episode``        :class:`Episode`, :func:`rollout`, :func:`make_env`, the env contract
 ``config``         :class:`ExperimentConfig`, the settings of a run
 ``loop``           :class:`Experiment`, the paper's Algorithm 1 with saving/resume
 ``learning``       the model and policy phases of a learned episode, predictions
@@ -18,10 +18,12 @@ module             job
 This package logs through :mod:`logging`; nothing here prints (the tasks print their tables).
 """
 from .config import ExperimentConfig
-from .episode import Episode, make_env, rollout, stack_transitions
+from .episode import (DISTANCE_KEYS, EnvironmentContractError, Episode, make_env, rollout,
+                      stack_transitions)
 from .loop import Experiment
 from .scoring import PHASES, episode_solved, saturating_cost
 from .store import RunStore
 
-__all__ = ["Episode", "Experiment", "ExperimentConfig", "PHASES", "RunStore",
-           "episode_solved", "make_env", "rollout", "saturating_cost", "stack_transitions"]
+__all__ = ["DISTANCE_KEYS", "EnvironmentContractError", "Episode", "Experiment",
+           "ExperimentConfig", "PHASES", "RunStore", "episode_solved", "make_env", "rollout",
+           "saturating_cost", "stack_transitions"]

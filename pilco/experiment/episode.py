@@ -10,7 +10,8 @@ import numpy as np
 from .progress import progress_bar
 from .signals import raise_if_stop_requested
 
-__all__ = ["Episode", "rollout", "make_env", "distance_from_info", "stack_transitions"]
+__all__ = ["Episode", "rollout", "make_env", "distance_from_info", "stack_transitions",
+           "DISTANCE_KEYS", "EnvironmentContractError"]
 
 
 @dataclasses.dataclass
@@ -57,12 +58,30 @@ def stack_transitions(episodes) -> Tuple[np.ndarray, np.ndarray]:
     return np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
 
 
-def distance_from_info(env, info: Dict[str, Any]) -> float:  # noqa: ARG001 - distance_fn
-    """The task distance an env reports in ``info`` (``distance`` or ``tip_distance``)."""
-    for key in ("distance", "tip_distance"):
+class EnvironmentContractError(ValueError):
+    """An environment that does not report what the loop needs of it (the task distance
+    in ``info``)."""
+
+
+#: the ``info`` keys the loop reads the task distance from, the first one present
+DISTANCE_KEYS = ("distance", "tip_distance")
+
+
+def distance_from_info(env, info: Dict[str, Any]) -> float:
+    """The task distance an env reports in ``info`` (:data:`DISTANCE_KEYS`): the default
+    ``distance_fn``. Raises :class:`EnvironmentContractError` naming the contract when
+    ``info`` holds none of them (at the first reset, before any step is taken): every
+    episode's score (closest and final distance, solved or not) is read from it."""
+    for key in DISTANCE_KEYS:
         if key in info:
             return float(info[key])
-    return float("nan")
+    name = getattr(getattr(env, "spec", None), "id", None) or type(env).__name__
+    raise EnvironmentContractError(
+        f"environment {name} reports no task distance: the info of reset() and step() "
+        f"holds none of {', '.join(map(repr, DISTANCE_KEYS))} (it holds "
+        f"{sorted(map(str, info)) or 'nothing'}). pilco scores every episode by the "
+        f"distance of each state to the goal: put it in info as 'distance', or give the "
+        f"Experiment a distance_fn(env, info) -> float (in a Task: from hooks())")
 
 
 def make_env(env_id: str, env_kwargs: Optional[Dict[str, Any]] = None, render: bool = False):

@@ -34,6 +34,7 @@ from ..files import write_npz_atomic
 from ..rewards import (AxisBumpsReward, CartPoleReward, CombinedRewards, ExponentialReward,
                        LinearMapReward, LinearReward)
 from ..validation import check_format_version, check_path
+from .custom import CUSTOM, build_custom, custom_spec
 from .mgpr import MGPR
 from .smgpr import SMGPR
 
@@ -139,16 +140,15 @@ def _controller_spec(controller, arrays, trainable) -> dict:
         _put_params(arrays, trainable, "controller/W", [controller.W])
         _put_params(arrays, trainable, "controller/b", [controller.b])
     else:
-        raise TypeError(
-            f"cannot save a controller of type {kind.__name__}: supported are RbfController "
-            f"and LinearController"
-        )
+        return custom_spec(controller, arrays, trainable, "controller/", "controller")
     arrays["controller/max_action"] = np.asarray(controller.max_action, dtype=np.float64)
     return spec
 
 
 def _build_controller(spec: dict, arrays, trainable, path):
     kind = spec.get("type")
+    if kind == CUSTOM:
+        return build_custom(spec, arrays, trainable, "controller/", path, "controller")
     squash = spec.get("squash")
     if squash is not None and squash not in _SQUASHES:
         raise ValueError(f"{path}: unknown squash function {squash!r}")
@@ -206,15 +206,13 @@ def _reward_spec(reward, arrays, prefix: str) -> dict:
         arrays[prefix + "b"] = reward.b.numpy()
         return dict(type="LinearMapReward", state_dim=reward.state_dim,
                     base=_reward_spec(reward.base_reward, arrays, prefix + "base/"))
-    raise TypeError(
-        f"cannot save a reward of type {kind.__name__}: supported are ExponentialReward, "
-        f"AxisBumpsReward, LinearReward, CombinedRewards, CartPoleReward and "
-        f"LinearMapReward"
-    )
+    return custom_spec(reward, arrays, None, prefix, "reward")
 
 
 def _build_reward(spec: dict, arrays, prefix: str, path):
     kind = spec.get("type")
+    if kind == CUSTOM:
+        return build_custom(spec, arrays, None, prefix, path, "reward")
     if kind == "ExponentialReward":
         return ExponentialReward(spec["state_dim"], W=_get(arrays, prefix + "W", path),
                                  t=_get(arrays, prefix + "t", path))
@@ -286,8 +284,10 @@ def agent_arrays(agent) -> Dict[str, np.ndarray]:
     in version 2 also ``m_init`` [T, D] with ``S_init`` [D, D] or [T, D, D] (T tasks)
     and the non-default index sets (``context_indices``, ``dynamics_indices``,
     ``policy_indices``).
-    Raises :class:`TypeError` for components that cannot be stored (custom controllers,
-    rewards, squash functions or dynamics models).
+    Controllers and rewards of other classes are stored through their ``get_config()``
+    (:mod:`pilco.models.custom`). Raises :class:`TypeError` for components that cannot be
+    stored (controllers or rewards without ``get_config()``, squash functions, dynamics
+    models of other classes).
     """
     arrays: Dict[str, np.ndarray] = {}
     trainable: Dict[str, List[bool]] = {}
@@ -384,7 +384,9 @@ def policy_arrays(controller, state_dim: int,
                       unsquashed_variance=np.array(0.0))
     else:
         raise TypeError(f"cannot export a controller of type {type(controller).__name__}: "
-                        f"supported are RbfController and LinearController")
+                        f"a policy file holds an RbfController or a LinearController, "
+                        f"evaluated with NumPy alone; a controller of your own is saved "
+                        f"with its agent (agent.save, PILCO.load)")
     meta = dict(format=POLICY_FORMAT, version=POLICY_VERSION, pilco_version=__version__,
                 kind=kind, squash=squash, state_dim=state_dim,
                 control_dim=controller.control_dim, feature_dim=controller.state_dim,

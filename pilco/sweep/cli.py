@@ -60,7 +60,8 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
         epilog="examples:\n" + "\n".join(f"  %(prog)s {e}" for e in EXAMPLES),
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("task", metavar="TASK",
-                        help=f"one of: {', '.join(pilco.tasks.TASKS)}")
+                        help=f"one of: {', '.join(pilco.tasks.TASKS)}, or "
+                             f"package.module:ATTRIBUTE (a task of your own)")
     parser.add_argument("--seeds", default="0-9",
                         help="seeds: a range 0-19, a list 0,3,5 or both (default 0-9)")
     parser.add_argument("--output", metavar="DIR", default=None,
@@ -118,9 +119,11 @@ def plan(args: argparse.Namespace, extra: Sequence[str]) -> Tuple[List[RunSpec],
         except ValueError as err:
             raise ValueError(f"setting {label}: {args.task} rejects its flags: {err}") \
                 from None
-    output = os.path.abspath(args.output or os.path.join("runs", f"sweep-{args.task}"))
+    output = os.path.abspath(args.output or os.path.join(
+        "runs", f"sweep-{args.task.replace(':', '-')}"))
+    root = pilco.tasks.task_import_root(args.task)
     specs = [RunSpec(args.task, seed, label, tuple([*flags, *extra]),
-                     os.path.join(output, label, f"seed-{seed}"))
+                     os.path.join(output, label, f"seed-{seed}"), import_root=root)
              for label, flags in combos for seed in seeds]
     described = [{"label": label, "flags": [*flags, *extra]} for label, flags in combos]
     return specs, described

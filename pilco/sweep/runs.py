@@ -66,13 +66,16 @@ ATTEMPTS = "attempts.log"
 class RunSpec:
     """One run of a sweep: ``task`` with ``seed`` and ``flags`` (the setting's flags and
     the extra task flags, without the ones the sweep always passes) into ``directory``
-    (absolute, on the driver's machine); ``label`` names the setting."""
+    (absolute, on the driver's machine); ``label`` names the setting; ``import_root`` is
+    put first on the run's ``PYTHONPATH`` (the directory of a task's module named by
+    ``module:ATTRIBUTE``, which the run's process must import)."""
 
     task: str
     seed: int
     label: str
     flags: Tuple[str, ...]
     directory: str
+    import_root: Optional[str] = None
 
     def command(self, directory: Optional[str] = None) -> List[str]:
         """The run's command line (``directory`` replaces the run directory)."""
@@ -257,6 +260,9 @@ def execute_run(spec: RunSpec, threads: int = 1, resume_saved: bool = False
         # the flags given again win over the saved ones, so the run keeps this setting
         command += ["--resume", directory]
     env = run_environment(threads, directory)
+    if spec.import_root:
+        env["PYTHONPATH"] = os.pathsep.join(
+            p for p in (spec.import_root, env.get("PYTHONPATH")) if p)
     out_path = os.path.join(directory, "stdout.log")
     err_path = os.path.join(directory, "stderr.log")
     with open(out_path, "wb") as out, open(err_path, "wb") as err:

@@ -19,7 +19,7 @@ import os
 import sys
 from typing import Any, Callable, ClassVar, Dict, List, Mapping, Optional, Sequence, Type
 
-from ..experiment import Experiment, ExperimentConfig
+from ..experiment import EnvironmentContractError, Experiment, ExperimentConfig
 from ..experiment.report import format_episode_table, format_timing_table
 from .settings import RunSettings, build_parser, parse_settings, settings_to_dict
 
@@ -60,10 +60,21 @@ class Task:
                             self.examples)
 
     @property
+    def reference(self) -> str:
+        """How another process finds this task: ``module:ATTRIBUTE`` when it was looked
+        up so (:func:`pilco.tasks.get_task`), else :attr:`name` (the package's tasks are
+        registered by name, :data:`pilco.tasks.TASKS`). Runs record it as their ``task``,
+        so that a sweep starts and the diagnosis reopens a task defined outside the
+        package."""
+        from . import _REFERENCES
+
+        return _REFERENCES.get(id(self), self.name)
+
+    @property
     def prog(self) -> str:
         """The task's command in usage lines and errors (``python -m pilco.tasks TASK``
         and ``examples/TASK.py`` run the same)."""
-        return f"pilco run {self.name}"
+        return f"pilco run {self.reference}"
 
     @property
     def examples(self) -> List[str]:
@@ -113,7 +124,7 @@ class Task:
         task's own fields ``task`` (env id and arguments, costs, the solved rule)."""
         s = settings
         return ExperimentConfig(
-            task=self.name, seed=s.seed, episodes=s.episodes,
+            task=self.reference, seed=s.seed, episodes=s.episodes,
             random_episodes=s.random_episodes, steps=s.horizon,
             max_data=s.max_data, model_iters=s.model_iters, model_restarts=s.model_restarts,
             model_min_rel_improvement=s.model_min_rel_improvement,
@@ -234,12 +245,18 @@ class Task:
 
     def main(self, argv: Optional[Sequence[str]] = None) -> int:
         """The task as a command; returns the exit status (2 after a usage error, such as
-        a ``--resume`` directory that holds no run, said in one line)."""
+        a ``--resume`` directory that holds no run, or an environment that reports no
+        task distance, said in one line)."""
         settings = self.parse(argv)
         try:
             exp = self.experiment(settings)
         except RunDirectoryError as err:
             sys.stderr.write(f"{self.prog}: error: {err}\n")
             return 2
-        summary = self.run(exp, settings)
+        try:
+            summary = self.run(exp, settings)
+        except EnvironmentContractError as err:  # raised at the first reset
+            exp.close()
+            sys.stderr.write(f"{self.prog}: error: {err}\n")
+            return 2
         return self.finish(exp, summary, settings)

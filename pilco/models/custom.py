@@ -1,0 +1,126 @@
+"""Rewards and controllers of your own in agent files: the ``get_config`` protocol.
+
+pilco's own rewards and controllers are stored by :mod:`pilco.models.storage` field by
+field. Any other class is stored when it follows this protocol (no base class, no
+registration):
+
+- ``get_config(self) -> dict``: the keyword arguments that rebuild it, JSON-ready
+  (numbers, strings, booleans, None, lists and dicts of them; NumPy arrays and scalars
+  are turned into lists and numbers here);
+- optionally a classmethod ``from_config(cls, config)``; without it ``cls(**config)``;
+- the class is importable as ``module:QualifiedName`` where the agent is loaded (defined
+  at the top level of a module, e.g. the module of a task run with ``pilco run
+  mymod:TASK``; a class defined in a script's ``__main__`` loads only in that script).
+
+Its ``gpflow.Parameter`` s (:func:`gpflow.utilities.parameter_dict`, by attribute path)
+are stored with their values, raw variables and trainable flags and assigned after the
+object is rebuilt, so a trained parameter comes back as trained, bit for bit.
+"""
+from __future__ import annotations
+
+import importlib
+import json
+import logging
+from typing import Any, Dict, List, Optional
+
+import gpflow
+import numpy as np
+
+__all__ = ["CUSTOM", "is_storable", "custom_spec", "build_custom"]
+
+logger = logging.getLogger(__name__)
+
+#: the ``type`` of a stored component that follows the protocol
+CUSTOM = "custom"
+
+
+def is_storable(obj) -> bool:
+    """True when ``obj`` follows the ``get_config`` protocol."""
+    return callable(getattr(obj, "get_config", None))
+
+
+def _json_ready(value, where: str):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, dict):
+        return {str(k): _json_ready(v, f"{where}.{k}") for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    raise TypeError(f"{where} is a {type(value).__name__}: get_config() must return "
+                    f"numbers, strings, lists, dicts or NumPy arrays")
+
+
+def custom_spec(obj, arrays: Dict[str, np.ndarray],
+                trainable: Optional[Dict[str, List[bool]]], prefix: str, what: str) -> dict:
+    """The metadata of ``obj`` (a ``what``, e.g. "reward") under the protocol; its
+    parameters go into ``arrays`` (and their trainable flags into ``trainable``, unless
+    None) under keys starting with ``prefix``.
+    TypeError naming the missing piece when ``obj`` does not follow it."""
+    kind = type(obj)
+    name = f"{kind.__module__}:{kind.__qualname__}"
+    if not is_storable(obj):
+        raise TypeError(f"cannot save a {what} of type {kind.__name__}: define "
+                        f"get_config() returning the keyword arguments that rebuild it "
+                        f"(pilco.models.custom)")
+    if "<locals>" in kind.__qualname__:
+        raise TypeError(f"cannot save a {what} of type {kind.__name__}: the class is "
+                        f"defined inside a function; define it at a module's top level")
+    if kind.__module__ == "__main__":
+        logger.warning("the %s %s is defined in __main__: only this script can load the "
+                       "saved agent", what, kind.__name__)
+    config = _json_ready(obj.get_config(), f"{kind.__name__}.get_config()")
+    json.dumps(config)
+    params = gpflow.utilities.parameter_dict(obj)
+    for path, p in params.items():
+        key = prefix + "param" + path
+        arrays[key] = p.numpy()
+        arrays[key + "_raw"] = p.unconstrained_variable.numpy()
+        if trainable is not None:
+            trainable[key] = [bool(p.trainable)]
+    return dict(type=CUSTOM, cls=name, config=config, params=sorted(params))
+
+
+def build_custom(spec: dict, arrays: Dict[str, np.ndarray],
+                 trainable: Optional[Dict[str, List[bool]]], prefix: str, path,
+                 what: str) -> Any:
+    """The ``what`` stored by :func:`custom_spec`, rebuilt and its parameters assigned.
+    ValueError naming the class when it cannot be imported or rebuilt."""
+    name = spec.get("cls", "")
+    module, _, qualname = name.partition(":")
+    try:
+        found: Any = importlib.import_module(module)
+        for part in qualname.split("."):
+            found = getattr(found, part)
+    except (ImportError, AttributeError, ValueError) as err:
+        raise ValueError(f"{path}: the {what} class {name!r} cannot be imported ({err}); "
+                         f"is its module on PYTHONPATH?") from err
+    config = spec.get("config", {})
+    try:
+        from_config = getattr(found, "from_config", None)
+        obj = from_config(config) if callable(from_config) else found(**config)
+    except Exception as err:  # noqa: BLE001 - a user's constructor; say which one failed
+        raise ValueError(f"{path}: the {what} {name!r} cannot be rebuilt from its saved "
+                         f"config ({type(err).__name__}: {err})") from err
+    params = gpflow.utilities.parameter_dict(obj)
+    missing = sorted(set(spec.get("params", [])) - set(params))
+    if missing:
+        raise ValueError(f"{path}: the rebuilt {what} {name!r} has no parameter(s) "
+                         f"{', '.join(missing)} that were saved")
+    for p_path in spec.get("params", []):
+        key = prefix + "param" + p_path
+        if key not in arrays:
+            raise ValueError(f"{path} is incomplete: entry {key!r} is missing")
+        p = params[p_path]
+        raw = arrays.get(key + "_raw")
+        if raw is not None and raw.shape == tuple(p.unconstrained_variable.shape):
+            p.unconstrained_variable.assign(raw)
+        else:
+            p.assign(arrays[key])
+        flags = (trainable or {}).get(key)
+        if flags:
+            gpflow.set_trainable(p, bool(flags[0]))
+    return obj
