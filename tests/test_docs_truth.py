@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import re
 import shlex
 from functools import lru_cache
