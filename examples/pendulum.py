@@ -15,14 +15,14 @@ import os
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
 
-import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
-from gpflow import set_trainable  # noqa: E402
+import gymnasium as gym
+import numpy as np
+from gpflow import set_trainable
 
-import pilco.envs  # noqa: E402,F401  (registers pilco/PendulumSwingUp-v0)
-from pilco.controllers import RbfController  # noqa: E402
-from pilco.models import PILCO  # noqa: E402
-from pilco.rewards import ExponentialReward  # noqa: E402
+import pilco.envs  # registers pilco/PendulumSwingUp-v0
+from pilco.controllers import RbfController
+from pilco.models import PILCO
+from pilco.rewards import ExponentialReward
 
 
 def rollout(env, pilco, timesteps, random=False):

@@ -57,7 +57,7 @@ def stack_transitions(episodes) -> Tuple[np.ndarray, np.ndarray]:
     return np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
 
 
-def distance_from_info(env, info: Dict[str, Any]) -> float:  # noqa: ARG001 - distance_fn
+def distance_from_info(env, info: Dict[str, Any]) -> float:  # distance_fn
     """The task distance an env reports in ``info`` (``distance`` or ``tip_distance``)."""
     for key in ("distance", "tip_distance"):
         if key in info:
