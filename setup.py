@@ -54,6 +54,8 @@ setup(
             "pytest-xdist>=3.2",
             "nbmake>=1.4",
             "ipykernel>=6",
+            # `ruff check .` in CI (.ci/run); ruff.toml holds the rules
+            "ruff==0.17.5",
         ],
     },
 )

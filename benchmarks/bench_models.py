@@ -50,7 +50,7 @@ def measure(problem: str, mode: str, repeats: int = 20) -> dict:
     def new_model():
         gp = MGPR(data(problem))
         if mode == "per-output":
-            gp._batchable = lambda: False  # noqa: SLF001 - the per-output path, compared
+            gp._batchable = lambda: False  # the per-output path, compared
         return gp
 
     gp = new_model()
@@ -83,7 +83,7 @@ def measure(problem: str, mode: str, repeats: int = 20) -> dict:
     return {"trace_seconds": trace, "operations": len(graph.get_operations()),
             "loss_gradient_seconds": float(np.median(seconds)),
             "first_optimize_seconds": first, "second_optimize_seconds": second,
-            "final_loss": float(np.sum(gp._model_losses()))}  # noqa: SLF001
+            "final_loss": float(np.sum(gp._model_losses()))}
 
 
 def fresh(problem: str, mode: str) -> dict:

@@ -80,7 +80,9 @@ def rollout(env, agent, random: bool):
     for _ in range(T):
         u = env.action_space.sample() if random else agent.compute_action(x[None, :])[0, :]
         x_new, th = env.step(u)
-        X.append(np.hstack((x, u))); Y.append(x_new - x); theta.append(th)
+        X.append(np.hstack((x, u)))
+        Y.append(x_new - x)
+        theta.append(th)
         x = x_new
     return np.stack(X), np.stack(Y), np.array(theta)
 
@@ -146,7 +148,8 @@ def main(argv=None) -> int:
     X, Y, _ = rollout(env, None, random=True)
     for _ in range(1, J):
         X_, Y_, _ = rollout(env, None, random=True)
-        X = np.vstack((X, X_)); Y = np.vstack((Y, Y_))
+        X = np.vstack((X, X_))
+        Y = np.vstack((Y, Y_))
     D, U = Y.shape[1], X.shape[1] - Y.shape[1]
     controller = RbfController(state_dim=D, control_dim=U, num_basis_functions=30,
                                max_action=2.0)
@@ -176,7 +179,8 @@ def main(argv=None) -> int:
                       up=bool(np.all(np.abs(theta[-10:]) < 0.3)),
                       final_abs_theta=float(abs(theta[-1])))
         iterations.append(record)
-        X = np.vstack((X, X_new)); Y = np.vstack((Y, Y_new))
+        X = np.vstack((X, X_new))
+        Y = np.vstack((Y, Y_new))
         agent.mgpr.set_data((X, Y))
 
     total = time.perf_counter() - start

@@ -15,14 +15,14 @@ import os
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # quiet TensorFlow's C++ start-up lines
 
-import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
-from gpflow import set_trainable  # noqa: E402
+import gymnasium as gym
+import numpy as np
+from gpflow import set_trainable
 
-import pilco.envs  # noqa: E402,F401  (registers pilco/PendulumSwingUp-v0)
-from pilco.controllers import RbfController  # noqa: E402
-from pilco.models import PILCO  # noqa: E402
-from pilco.rewards import ExponentialReward  # noqa: E402
+import pilco.envs  # registers pilco/PendulumSwingUp-v0
+from pilco.controllers import RbfController
+from pilco.models import PILCO
+from pilco.rewards import ExponentialReward
 
 
 def rollout(env, pilco, timesteps, random=False):
@@ -32,7 +32,9 @@ def rollout(env, pilco, timesteps, random=False):
     for _ in range(timesteps):
         u = env.action_space.sample() if random else pilco.compute_action(x[None, :])[0, :]
         x_new, _, terminated, truncated, info = env.step(u)
-        X.append(np.hstack((x, u))); Y.append(x_new - x); theta.append(info["theta"])
+        X.append(np.hstack((x, u)))
+        Y.append(x_new - x)
+        theta.append(info["theta"])
         x = x_new
         if terminated or truncated:
             break
@@ -59,12 +61,14 @@ target, weights = np.array([1.0, 0.0, 0.0]), np.diag([2.0, 2.0, 0.3])
 m_init, S_init = np.reshape([-1.0, 0.0, 0.0], (1, 3)), np.diag([0.01, 0.05, 0.01])
 np.random.seed(args.seed)
 env = gym.make("pilco/PendulumSwingUp-v0", substeps=SUBS, max_episode_steps=T)
-env.reset(seed=args.seed); env.action_space.seed(args.seed)
+env.reset(seed=args.seed)
+env.action_space.seed(args.seed)
 
 X, Y, _ = rollout(env, None, timesteps=T, random=True)
 for i in range(1, J):
     X_, Y_, _ = rollout(env, None, timesteps=T, random=True)
-    X = np.vstack((X, X_)); Y = np.vstack((Y, Y_))
+    X = np.vstack((X, X_))
+    Y = np.vstack((Y, Y_))
 state_dim = Y.shape[1]
 control_dim = X.shape[1] - state_dim
 controller = RbfController(state_dim=state_dim, control_dim=control_dim, num_basis_functions=bf,
@@ -87,7 +91,8 @@ for it in range(1, N + 1):
     first_up = first_up or (it if up else None)
     log.info("iteration %d: return %.2f (predicted %.2f), final |θ| %.2f rad, up: %s", it,
              total, float(predicted[0, 0]), abs(theta[-1]), up)
-    X = np.vstack((X, X_new)); Y = np.vstack((Y, Y_new))
+    X = np.vstack((X, X_new))
+    Y = np.vstack((Y, Y_new))
     pilco.mgpr.set_data((X, Y))
 
 path = pilco.save(args.output.format(seed=args.seed))

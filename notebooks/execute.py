@@ -341,8 +341,8 @@ def stored_notebook_problems(nb: Dict[str, Any], size: Optional[int] = None) -> 
     elif stored != current:
         problems.append(f"its code cells changed since its outputs were stored: run `{COMMAND}`")
     if size is not None and size >= MAX_NOTEBOOK_BYTES:
-        problems.append(f"it is {size / 1e6:.2f} MB, the limit is {MAX_NOTEBOOK_BYTES / 1e6:.0f} MB "
-                        "(smaller or fewer figures)")
+        problems.append(f"it is {size / 1e6:.2f} MB, the limit is "
+                        f"{MAX_NOTEBOOK_BYTES / 1e6:.0f} MB (smaller or fewer figures)")
     if "widgets" in nb.get("metadata", {}):
         problems.append("its metadata holds widget state")
     expected = expected_outputs(nb)

@@ -237,7 +237,7 @@ def save_frames(frames: Sequence[np.ndarray], path_base: str, fps: int = 10,
         gif = path_base + ".gif"
         imageio.mimsave(gif, frames, duration=1.0 / fps, loop=0)
         written.append(gif)
-    except Exception as err:  # noqa: BLE001 - the strip below is the fallback
+    except Exception as err:  # the strip below is the fallback
         logger.info("no GIF (%s); writing a PNG strip only", err)
     idx = np.unique(np.linspace(0, len(frames) - 1, min(strip_frames, len(frames))).astype(int))
     h, w = frames[0].shape[:2]
@@ -274,7 +274,7 @@ def save_all(exp, out: str, title: str = "", state_dims: Sequence[int] = (0, 1, 
         try:
             out_ = fn(*a, **kw)
             written.extend(out_ if isinstance(out_, list) else [out_])
-        except Exception as err:  # noqa: BLE001 - keep drawing the others
+        except Exception as err:  # keep drawing the others
             logger.warning("figure %s failed: %s", getattr(fn, "__name__", fn), err)
 
     attempt(plot_distances, [e.distances for e in eps], os.path.join(out, "distance.png"),

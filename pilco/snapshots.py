@@ -88,7 +88,7 @@ class TrackingScipy(gpflow.optimizers.Scipy):
         (relative, like scipy's ``ftol``, so one value serves losses of any scale)."""
         history: List[float] = []
 
-        def on_step(step, variables, values):  # noqa: ARG001 - gpflow's callback signature
+        def on_step(step, variables, values):  # gpflow's callback signature
             if callback is not None:
                 callback(int(step))
             logger.debug("iteration %d: best %s %.6g", step, what, self.run_best_loss)

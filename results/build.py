@@ -11,8 +11,9 @@ has finished, ``sweep.json``. A file holds
 * ``format`` (:data:`FORMAT`), ``task``, ``command`` (the sweep's command line from
   ``sweep.json``, its output directory written ``DIR``; ``null`` before ``sweep.json``
   exists), ``seeds`` (the seeds asked for, from ``sweep.json``; without it the seeds of
-  the ``seed-S`` directories, which a sweep makes for every run it plans) and ``failed`` (``{setting: [seed, ...]}``: runs ``sweep.json`` records as failed that have
-  no finished summary);
+  the ``seed-S`` directories, which a sweep makes for every run it plans) and ``failed``
+  (``{setting: [seed, ...]}``: runs ``sweep.json`` records as failed that have no finished
+  summary);
 * ``runs``: one entry per finished run, by setting and seed: ``setting``, ``seed``,
   ``success``, ``solved``, ``solved_at_episode``, ``seconds`` (the run's total),
   ``episodes`` (per episode ``episode``, ``random``, ``steps``, ``min_distance``,

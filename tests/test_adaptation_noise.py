@@ -30,7 +30,7 @@ class PlaneEnv(gymnasium.Env):
     broken = False
     joint_dims = (0, 1)  # each action moves its own coordinate
 
-    def damage(self, joints, mode):  # noqa: ARG002 - the reacher's signature
+    def damage(self, joints, mode):  # the reacher's signature
         PlaneEnv.broken = True
 
     def __init__(self):

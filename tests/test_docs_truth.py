@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import re
 import shlex
 from functools import lru_cache
@@ -94,7 +93,7 @@ def _lines(doc: str) -> Iterator[Tuple[str, int]]:
 
 # -- the project's parsers ----------------------------------------------------------------
 def _options(parser: argparse.ArgumentParser) -> Set[str]:
-    return {s for action in parser._actions for s in action.option_strings}  # noqa: SLF001
+    return {s for action in parser._actions for s in action.option_strings}
 
 
 @lru_cache(maxsize=None)

@@ -261,7 +261,7 @@ def fetch_cls():
         pytest.importorskip("mujoco")
     except pytest.skip.Exception:
         raise
-    except Exception as exc:  # noqa: BLE001 - a broken GL backend fails at import time
+    except Exception as exc:  # a broken GL backend fails at import time
         pytest.skip(f"mujoco cannot be imported here: {exc!r}")
     from pilco.envs.fetch_reacher import FetchJointReacher, default_model_path
 

@@ -12,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 from pilco.envs import FETCH_DAMAGED_ID, FETCH_ID
 
 pytest.importorskip("mujoco")
-from pilco.envs.fetch_reacher import FetchJointReacher, default_model_path  # noqa: E402
+from pilco.envs.fetch_reacher import FetchJointReacher, default_model_path
 
 try:
     default_model_path()

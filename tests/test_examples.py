@@ -39,7 +39,7 @@ def _have_mujoco() -> bool:
     try:
         import mujoco  # noqa: F401
         import gymnasium_robotics  # noqa: F401
-    except Exception:  # noqa: BLE001
+    except Exception:
         return False
     return True
 

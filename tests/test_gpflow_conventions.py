@@ -38,7 +38,8 @@ def _gprs(model: MGPR, X, Y):
     """One gpflow GPR per output with the model's hyperparameters."""
     out = []
     for e, m in enumerate(model.models):
-        gpr = gpflow.models.GPR((X, Y[:, e:e + 1]), kernel=gpflow.kernels.SquaredExponential(lengthscales=np.ones(2)))
+        gpr = gpflow.models.GPR((X, Y[:, e:e + 1]),
+                                kernel=gpflow.kernels.SquaredExponential(lengthscales=np.ones(2)))
         gpr.kernel.lengthscales.assign(m.kernel.lengthscales)
         gpr.kernel.variance.assign(m.kernel.variance)
         gpr.likelihood.variance.assign(m.likelihood.variance)

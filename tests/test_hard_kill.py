@@ -94,7 +94,7 @@ class BreakableLineEnv(LineEnv):
 
     effect = 1.0
 
-    def damage(self, joints, mode):  # noqa: ARG002 - the reacher's signature
+    def damage(self, joints, mode):  # the reacher's signature
         self.effect = 0.5
 
     def step(self, action):
@@ -111,7 +111,7 @@ class LineTask:
     def __init__(self, built):
         self.built = built  # every agent the runs built
 
-    def build(self, data, start_states):  # noqa: ARG002
+    def build(self, data, start_states):
         self.built.append(SavingAgent(data))
         return self.built[-1]
 
@@ -332,7 +332,7 @@ def test_a_failed_write_never_makes_progress_count_missing_data(
         np.testing.assert_array_equal(arrays["X"], reference["X"], err_msg=str(fail_at))
 
 
-def line_pilco(data, start_states):  # noqa: ARG001
+def line_pilco(data, start_states):
     """A real PILCO agent for the line env, tiny."""
     from pilco.controllers import LinearController
     from pilco.models import PILCO

@@ -490,7 +490,8 @@ BAD = [
     ("S-init-one-start-many-covariances", dict(S_init=TASKS_S), ValueError,
      "holds 3 covariances"),
     ("S-init-not-psd",
-     dict(m_init=TASKS_M, S_init=TASKS_S * np.array([1.0, -1.0, 1.0])[:, None, None]), ValueError, "task 1's initial state covariance is not positive semi-definite"),
+     dict(m_init=TASKS_M, S_init=TASKS_S * np.array([1.0, -1.0, 1.0])[:, None, None]),
+     ValueError, "task 1's initial state covariance is not positive semi-definite"),
 ]
 
 

@@ -6,7 +6,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from pilco.envs import FetchJointReacher, fewest_steps  # noqa: E402
+from pilco.envs import FetchJointReacher, fewest_steps
 
 
 def replay(env, bound):

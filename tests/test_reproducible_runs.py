@@ -15,8 +15,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 from pilco.runtime import THREAD_VARIABLES, thread_environment
 
 ROOT = Path(__file__).resolve().parents[1]

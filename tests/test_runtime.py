@@ -192,7 +192,8 @@ def test_probe_lines_are_matched_narrowly():
 ONEDNN = ("I0000 00:00:1700000000.000000    1234 port.cc:153] oneDNN custom operations are "
           "on. You may see slightly different numerical results due to floating-point "
           "round-off errors from different computation orders.")
-WARNED = "W0000 00:00:1700000000.000000    1234 gpu_device.cc:2344] Cannot dlopen some GPU libraries."
+WARNED = ("W0000 00:00:1700000000.000000    1234 gpu_device.cc:2344] Cannot dlopen some GPU "
+          "libraries.")
 
 
 def test_lines_below_the_users_level_go_with_their_absl_note():

@@ -336,7 +336,7 @@ class Injector(threading.Thread):
             while not self.stop.is_set():
                 self.step()
                 time.sleep(0.02)
-        except Exception as err:  # noqa: BLE001 - reported by the fixture
+        except Exception as err:  # reported by the fixture
             self.errors.append(err)
 
     def step(self):

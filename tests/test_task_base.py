@@ -39,7 +39,7 @@ def parse(argv):
 
 def test_every_field_is_one_flag_with_its_default_in_the_help():
     parser = build_parser_of_toy()
-    flags = {a.dest: a for a in parser._actions if a.dest != "help"}  # noqa: SLF001
+    flags = {a.dest: a for a in parser._actions if a.dest != "help"}
     fields = {f.name for f in dataclasses.fields(ToySettings)} - {"derived"}
     assert set(flags) == fields
     assert flags["width"].option_strings == ["--width"]
@@ -64,7 +64,7 @@ def test_flags_are_read_typed_and_bad_values_are_usage_errors(capsys):
         0.25, 4, "b", True, False, (1.0, 2.0))
     assert s.output == "runs/toy-seed7"  # {seed} filled in
     with pytest.raises(dataclasses.FrozenInstanceError):
-        s.width = 1.0  # noqa - frozen
+        s.width = 1.0  # frozen
     for argv, message in ((["--steps", "0"], "--steps: must be at least 1"),
                           (["--mode", "c"], "--mode: invalid choice"),
                           (["--width", "x"], "--width: invalid float value")):
@@ -136,7 +136,7 @@ def test_the_registry_names_every_task_once():
         assert isinstance(task, Task) and task.name == name
         assert issubclass(task.settings, RunSettings)
         parser = build_parser(name)
-        dests = {a.dest for a in parser._actions}  # noqa: SLF001
+        dests = {a.dest for a in parser._actions}
         flagged = {f.name for f in dataclasses.fields(task.settings)
                    if f.metadata.get("pilco_flag", {}).get("flag", True)}
         assert flagged - {"preset"} <= dests
@@ -171,7 +171,7 @@ def test_the_readmes_new_task_example_makes_a_task_with_its_flags(capsys):
         blocks = re.findall(r"```python\n(.*?)```", f.read(), flags=re.S)
     block = next(b for b in blocks if "class MyTask(Task)" in b)
     namespace: dict = {}
-    exec(compile(block, "README.md", "exec"), namespace)  # noqa: S102 - our own README
+    exec(compile(block, "README.md", "exec"), namespace)  # our own README
     task = namespace["MyTask"]()
     s = task.parse(["--max-torque", "1.5"])
     assert (s.max_torque, s.episodes, s.horizon, s.policy_iters) == (1.5, 6, 30, 50)

@@ -44,7 +44,8 @@ def _factorization(rng, n=13, D=3, E=2):
     Y = np.stack([np.sin(X @ rng.standard_normal(D)) for _ in range(E)], 1)
     ell = tf.constant(rng.uniform(0.5, 1.5, (E, D)))
     return moments.factorize(tf.constant(X), tf.constant(Y), ell,
-                             tf.constant([0.8, 1.3], tf.float64), tf.constant([1e-2, 3e-3], tf.float64))
+                             tf.constant([0.8, 1.3], tf.float64),
+                             tf.constant([1e-2, 3e-3], tf.float64))
 
 
 @pytest.mark.parametrize("deterministic", [False, True])

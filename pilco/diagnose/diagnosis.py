@@ -58,7 +58,7 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
     if rollouts:
         try:
             env = view.make_env()
-        except Exception as err:  # noqa: BLE001 - the rollouts are optional evidence
+        except Exception as err:  # the rollouts are optional evidence
             logger.warning("the run's environment cannot be made (%s): the candidate "
                            "policies are not run on the real system", err)
     logger.info("episode %d: the policy from %d other starts", number, starts if env else 0)

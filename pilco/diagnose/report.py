@@ -47,8 +47,8 @@ def format_report(result: Dict[str, Any], every: int = 5) -> str:
                   f"{'yes' if loop['wrong'] else 'no'}"]
     if "pred_distance_mean" in multi:
         lines += ["", "Model, multi-step from the start distribution under the episode's policy:",
-                  f"  (at each row's step; the ranges and the cost sums span the steps since "
-                  f"the row before)",
+                  "  (at each row's step; the ranges and the cost sums span the steps since "
+                  "the row before)",
                   f"  {'step':>4} {'pred d':>8} {'± std':>7} {'real d':>8} {'open-loop d':>12} "
                   f"{'pred d range':>14} {'real d range':>14} {'pred cost':>10} "
                   f"{'real cost':>10}"]

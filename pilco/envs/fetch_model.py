@@ -98,7 +98,7 @@ def _import_mujoco():
     """Import mujoco lazily (after choosing the GL backend)."""
     _default_gl_backend()
     try:
-        import mujoco  # noqa: PLC0415 - deliberately lazy
+        import mujoco  # deliberately lazy
     except ImportError as exc:  # pragma: no cover - depends on the installation
         raise ImportError(
             "FetchJointReacher needs mujoco and gymnasium-robotics: "
@@ -321,6 +321,6 @@ class FetchArm:
         if self._renderer is not None:
             try:
                 self._renderer.close()
-            except Exception:  # noqa: BLE001 - best effort at teardown
+            except Exception:  # best effort at teardown
                 logger.debug("Ignoring error while closing the MuJoCo renderer", exc_info=True)
             self._renderer = None

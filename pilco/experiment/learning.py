@@ -215,7 +215,7 @@ def predictions_before(exp) -> Dict[str, np.ndarray]:
         return {"pred_mean": np.asarray(M),
                 "pred_var": np.stack([np.diag(s) for s in np.asarray(S)]),
                 "pred_reward": np.asarray(R), "pred_reward_var": np.asarray(Rv)}
-    except Exception as err:  # noqa: BLE001 - a figure must not stop learning
+    except Exception as err:  # a figure must not stop learning
         logger.warning("multi-step prediction failed: %s", err)
         return {}
 
@@ -231,6 +231,6 @@ def predictions_after(exp, episode: Episode) -> Dict[str, np.ndarray]:
     try:
         mean, var = exp.agent.one_step_prediction(X)
         return {"onestep_mean": np.asarray(mean), "onestep_var": np.asarray(var)}
-    except Exception as err:  # noqa: BLE001
+    except Exception as err:
         logger.warning("one-step prediction failed: %s", err)
         return {}

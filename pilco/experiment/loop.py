@@ -147,7 +147,7 @@ class Experiment(RunRecord):
         if last and cfg.render and self.render_fn is not None:
             try:
                 ep.frames = list(self.render_fn(ep))
-            except Exception as err:  # noqa: BLE001 - frames are optional
+            except Exception as err:  # frames are optional
                 logger.warning("rendering the final episode failed: %s", err)
         return ep
 

@@ -21,7 +21,7 @@ def optimizer_callback(bar) -> Callable[[int], None]:
     """``callback(iteration)`` for ``optimize_policy``/``optimize_models``: ticks ``bar``
     and stops the optimiser (``KeyboardInterrupt``) once SIGTERM arrived."""
 
-    def callback(iteration: int) -> None:  # noqa: ARG001 - one tick per iteration
+    def callback(iteration: int) -> None:  # one tick per iteration
         bar.update(1)
         raise_if_stop_requested()
 

@@ -107,10 +107,10 @@ def summarise(exp) -> Dict[str, Any]:
     """The summary (``summary.json``) of :class:`~pilco.experiment.Experiment` ``exp``:
     task, seed, ``solved``, ``solved_at_episode``, ``solved_episodes`` (the learned
     episodes that met the rule), ``held_for_good`` (:func:`held_for_good`), the episode
-    records, ``seconds`` per phase and ``total`` wall time (all sessions; figures excluded), the task's
-    ``summary_fields``, ``complete`` (the loop finished), ``distances`` per episode and
-    ``success`` (the task's rule, default ``solved``) and ``provenance`` (code version,
-    library versions, CPU, TensorFlow's arithmetic settings: :mod:`.provenance`)."""
+    records, ``seconds`` per phase and ``total`` wall time (all sessions; figures excluded),
+    the task's ``summary_fields``, ``complete`` (the loop finished), ``distances`` per
+    episode and ``success`` (the task's rule, default ``solved``) and ``provenance`` (code
+    version, library versions, CPU, TensorFlow's arithmetic settings: :mod:`.provenance`)."""
     at = exp.solved_at_episode()
     summary = {
         "task": exp.config.task,

@@ -42,7 +42,7 @@ def sigterm_as_keyboard_interrupt() -> Iterator[None]:
     """
     global _stop_signal
 
-    def handler(signum, frame):  # noqa: ARG001 - signal handler signature
+    def handler(signum, frame):  # signal handler signature
         global _stop_signal
         _stop_signal = signum
 

@@ -87,7 +87,7 @@ class RunStore:
         """``agent.save(agent.npz)``; a failure is logged (the data are already safe)."""
         try:
             agent.save(self.agent_path)
-        except Exception as err:  # noqa: BLE001 - keep running; data are on disk
+        except Exception as err:  # keep running; data are on disk
             logger.warning("could not save the agent to %s: %s", self.agent_path, err)
             self.agent_current = False
             return False
@@ -138,7 +138,7 @@ class RunStore:
             from ..models import PILCO
 
             agent = PILCO.load(self.agent_path)
-        except Exception as err:  # noqa: BLE001 - the caller rebuilds the agent
+        except Exception as err:  # the caller rebuilds the agent
             logger.warning("could not load the agent from %s (%s); rebuilding it",
                            self.agent_path, err)
             return None

@@ -5,7 +5,6 @@ import logging
 from typing import Optional
 
 import gpflow
-import numpy as np
 import tensorflow as tf
 from check_shapes import check_shapes
 from gpflow.config import default_jitter

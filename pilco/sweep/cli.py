@@ -140,7 +140,7 @@ def _start_ray(args: argparse.Namespace) -> Tuple[bool, float]:
         try:
             ray.init(address=args.address, log_to_driver=False,
                      logging_level=logging.WARNING)
-        except Exception as err:  # noqa: BLE001 - Ray raises several kinds; all mean this
+        except Exception as err:  # Ray raises several kinds; all mean this
             raise SweepError(f"--address {args.address}: Ray could not connect ({err}); "
                              f"start a cluster (`ray start --head`), or leave out "
                              f"--address for a Ray of the sweep's own") from err

@@ -77,7 +77,7 @@ def setting_flags(key: str, value: str, parser: Optional[argparse.ArgumentParser
     """
     option = _option(key)
     if parser is not None:
-        action = next((a for a in parser._actions  # noqa: SLF001 - argparse has no API
+        action = next((a for a in parser._actions  # argparse has no API
                        if option in a.option_strings), None)
         if action is None:
             raise ValueError(f"the task has no flag {option} (from {key}={value}); see "

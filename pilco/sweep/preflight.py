@@ -64,7 +64,7 @@ def _ray_address_file() -> str:
         from ray._common.utils import get_ray_address_file  # Ray's own rule
 
         return get_ray_address_file(None)
-    except Exception:  # noqa: BLE001 - an older or newer Ray: the same rule, by hand
+    except Exception:  # an older or newer Ray: the same rule, by hand
         base = os.environ.get("RAY_TMPDIR") or (
             os.environ.get("TMPDIR") if sys.platform.startswith("linux") else None) or "/tmp"
         return os.path.join(base, "ray", "ray_current_cluster")

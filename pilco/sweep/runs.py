@@ -320,7 +320,7 @@ def _failure(spec: RunSpec, err: BaseException, attempts: int) -> Dict[str, Any]
 
 def _sigterm_as_interrupt():
     """SIGTERM raises KeyboardInterrupt in the driver (main thread only)."""
-    def handler(signum, frame):  # noqa: ARG001 - signal handler signature
+    def handler(signum, frame):  # signal handler signature
         raise KeyboardInterrupt
 
     return signal_handler(signal.SIGTERM, handler)

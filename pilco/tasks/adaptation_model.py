@@ -2,7 +2,8 @@
 flag's lengthscale (``--damage-input``), the healthy data's noise factors per state
 dimension (``--changed-output-noise``), the joints found stuck and no longer commanded
 (``--stop-stuck-joints``), and the re-plan inside the first damaged episode once one is
-found (``--replan-stuck-joints``). The settings are :class:`~pilco.tasks.adaptation.AdaptationSettings`.
+found (``--replan-stuck-joints``). The settings are
+:class:`~pilco.tasks.adaptation.AdaptationSettings`.
 """
 from __future__ import annotations
 
@@ -19,8 +20,9 @@ from ..experiment.learning import search_policy
 if TYPE_CHECKING:  # the settings class lives with the task, which imports this module
     from .adaptation import AdaptationSettings
 
-__all__ = ["DATA_STATE", "track_damage_data", "damaged_arm_data", "learn_the_flag", "output_disagreement", "per_output_noise", "joint_follow_ratios",
-           "stuck_joints", "stop_stuck_joints", "ReplanWhenStuck", "MIN_COMMANDED_ROTATION",
+__all__ = ["DATA_STATE", "track_damage_data", "damaged_arm_data", "learn_the_flag",
+           "output_disagreement", "per_output_noise", "joint_follow_ratios", "stuck_joints",
+           "stop_stuck_joints", "ReplanWhenStuck", "MIN_COMMANDED_ROTATION",
            "HEALTHY_FOLLOW_RATIO"]
 
 logger = logging.getLogger(__name__)
@@ -289,12 +291,12 @@ def stop_stuck_joints(exp: Experiment, s: AdaptationSettings, first: int) -> Non
     """With ``--stop-stuck-joints``, once the first damaged episode (``first``) ran and
     before the model learns from it: the joints :func:`stuck_joints` finds are no longer
     commanded (action bound 0), the model sees their commands in the damaged episodes as 0
-    (the data state's ``inert_actions`` from episode ``first``), and the healthy arm's transitions count
-    as equals again (noise factor 1): with the stuck joints' commands at 0 they describe the
-    damaged arm. The env's ``joint_dims`` say which state dimension holds each action's
-    joint. The summary holds ``joint_follow_ratio`` (first damaged episode, per action) and
-    ``stuck_joints`` (action indices; the Fetch arm's elbow is 3). Applied again on resume
-    (the saved agent keeps its bounds)."""
+    (the data state's ``inert_actions`` from episode ``first``), and the healthy arm's
+    transitions count as equals again (noise factor 1): with the stuck joints' commands at 0
+    they describe the damaged arm. The env's ``joint_dims`` say which state dimension holds
+    each action's joint. The summary holds ``joint_follow_ratio`` (first damaged episode, per
+    action) and ``stuck_joints`` (action indices; the Fetch arm's elbow is 3). Applied again
+    on resume (the saved agent keeps its bounds)."""
     fields, state = exp.summary_fields, track_damage_data(exp)
     if not s.stop_stuck_joints or len(exp.episodes) < first:
         return

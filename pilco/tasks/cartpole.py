@@ -137,7 +137,7 @@ class CartPoleTask(Task):
         from ..models import PILCO
         from ..rewards import CartPoleReward
 
-        def build(data, start_states):  # noqa: ARG001 - the start distribution is known
+        def build(data, start_states):  # the start distribution is known
             squash = squash_sat if s.squash == "sat" else squash_sin
             controller = RbfController(5, 1, s.basis_functions, s.max_force, squash,
                                        seed=s.seed)

@@ -81,7 +81,7 @@ class PendulumTask(Task):
         from ..models import PILCO
         from ..rewards import ExponentialReward
 
-        def build(data, start_states):  # noqa: ARG001 - the start distribution is known
+        def build(data, start_states):  # the start distribution is known
             controller = RbfController(3, 1, s.basis_functions, max_action=s.max_action,
                                        seed=s.seed)
             agent = PILCO(data, controller, ExponentialReward(3, W=WEIGHTS, t=TARGET),

@@ -109,8 +109,8 @@ SUCCESS_STEPS = 15
 LEARNED_EPISODES = 3
 
 
-@task_settings(episodes=1 + LEARNED_EPISODES, horizon=50, basis_functions=50, policy_iters=25, model_iters=100,
-               policy_min_rel_improvement=0.01, policy_patience=5,
+@task_settings(episodes=1 + LEARNED_EPISODES, horizon=50, basis_functions=50, policy_iters=25,
+               model_iters=100, policy_min_rel_improvement=0.01, policy_patience=5,
                output="runs/reacher-seed{seed}")
 class ReacherSettings(RunSettings):
     """The reacher's settings (the damaged arm and the adaptation start from these)."""

@@ -12,9 +12,9 @@ import numpy as np
 if TYPE_CHECKING:  # the settings class lives with the task, which imports this module
     from .reacher import ReacherSettings
 
-__all__ = ["PAPER_GP_PRIORS", "agent_builder", "reacher_agent", "ignore_constant_inputs", "init_policy_near",
-           "limit_bumps", "set_gp_priors", "position_weights", "main_position_reward",
-           "schedule", "after_model_fit"]
+__all__ = ["PAPER_GP_PRIORS", "agent_builder", "reacher_agent", "ignore_constant_inputs",
+           "init_policy_near", "limit_bumps", "set_gp_priors", "position_weights",
+           "main_position_reward", "schedule", "after_model_fit"]
 
 #: The paper code's priors on every dynamics GP's hyperparameters (GPflow 1's Gamma(shape,
 #: scale)): lengthscales ~ Gamma(1, 10), signal variance ~ Gamma(1.5, 2); training is then

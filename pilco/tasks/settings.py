@@ -73,7 +73,7 @@ def optional_float(text: str) -> Optional[float]:
         raise argparse.ArgumentTypeError(f"expected a number or None, got {text!r}") from None
 
 
-def setting(default: Any, help: str, *, kind: Optional[Callable[[str], Any]] = None,  # noqa: A002
+def setting(default: Any, help: str, *, kind: Optional[Callable[[str], Any]] = None,
             choices: Optional[Sequence[Any]] = None, nargs: Any = None,
             metavar: Any = None, group: str = "task", negatable: bool = False,
             flag: bool = True, unset: Optional[str] = None) -> Any:

@@ -27,8 +27,6 @@ import functools
 import inspect
 from typing import Callable, Dict
 
-import numpy as np
-
 from .arrays import _check_finite, _to_numpy
 
 __all__ = ["is_symbolic", "check_points", "check_symbolic_gaussian", "checked_arguments"]
@@ -79,7 +77,7 @@ def check_points(x, dim: int, name: str = "Xnew"):
         return _finite(tf.reshape(t, [-1, dim]), name)
     arr = _to_numpy(x, name)
     if arr.ndim != 2:
-        hint = (f" (one point: reshape it with x.reshape(1, -1))" if arr.ndim == 1 else "")
+        hint = (" (one point: reshape it with x.reshape(1, -1))" if arr.ndim == 1 else "")
         raise ValueError(f"{name} must be 2-D [points, {dim}], got shape {arr.shape}{hint}")
     if arr.shape[1] != dim:
         raise ValueError(f"{name} must have {dim} columns (the input dimension), got shape "
