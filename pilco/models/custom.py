@@ -102,7 +102,7 @@ def build_custom(spec: dict, arrays: Dict[str, np.ndarray],
     try:
         from_config = getattr(found, "from_config", None)
         obj = from_config(config) if callable(from_config) else found(**config)
-    except Exception as err:  # noqa: BLE001 - a user's constructor; say which one failed
+    except Exception as err:  # a user's constructor: say which one failed
         raise ValueError(f"{path}: the {what} {name!r} cannot be rebuilt from its saved "
                          f"config ({type(err).__name__}: {err})") from err
     params = gpflow.utilities.parameter_dict(obj)
