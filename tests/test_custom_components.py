@@ -124,3 +124,13 @@ def test_a_class_that_cannot_be_imported_is_named_at_load(tmp_path, monkeypatch)
     with pytest.raises(ValueError, match="'no_such_module_here:QuadraticCost' cannot be "
                                          "imported.*PYTHONPATH"):
         PILCO.load(path)
+
+
+def test_a_reward_of_your_own_gives_the_diagnosis_its_geometry():
+    from pilco.diagnose.geometry import CostGeometry, cost_geometry
+
+    reward = QuadraticCost([1.0, 0.0])
+    assert cost_geometry(reward) is None
+    reward.cost_geometry = lambda: CostGeometry(0.5, (0, 1), lambda X: X - reward.target)
+    geometry = cost_geometry(reward)
+    np.testing.assert_allclose(geometry.distance(np.array([[1.0, 3.0]])), [3.0])

@@ -162,20 +162,3 @@ def test_no_task_name_is_spelled_outside_the_tasks_package():
                         if pattern.search(line):
                             found.append(f"{os.path.relpath(path, ROOT)}:{number}: {line.strip()}")
     assert not found, "\n".join(found)
-
-
-def test_the_readmes_new_task_example_makes_a_task_with_its_flags(capsys):
-    """The README's "A new task" block, run as written: its settings class gets the flag
-    ``--max-torque`` with its check, and new defaults of common settings."""
-    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
-        blocks = re.findall(r"```python\n(.*?)```", f.read(), flags=re.S)
-    block = next(b for b in blocks if "class MyTask(Task)" in b)
-    namespace: dict = {}
-    exec(compile(block, "README.md", "exec"), namespace)  # our own README
-    task = namespace["MyTask"]()
-    s = task.parse(["--max-torque", "1.5"])
-    assert (s.max_torque, s.episodes, s.horizon, s.policy_iters) == (1.5, 6, 30, 50)
-    assert task.config(s).env_id == "MyEnv-v0" and task.config(s).task == "mytask"
-    with pytest.raises(SystemExit):
-        task.parse(["--max-torque", "-1"])
-    assert "--max-torque: must be positive" in capsys.readouterr().err

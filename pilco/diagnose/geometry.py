@@ -42,8 +42,14 @@ class CostGeometry:
 def cost_geometry(reward) -> Optional[CostGeometry]:
     """The :class:`CostGeometry` of ``ExponentialReward``, ``CartPoleReward`` and
     ``CombinedRewards`` of them (the widest positively weighted part's; parts with a
-    negative weight are penalties and left out); None for other rewards."""
+    negative weight are penalties and left out); of a reward of another class, what its
+    ``cost_geometry()`` method returns, if it has one; else None (the diagnosis then skips
+    its distance and cost checks)."""
     from ..rewards import CartPoleReward, CombinedRewards, ExponentialReward
+
+    own = getattr(reward, "cost_geometry", None)
+    if callable(own):
+        return own()
 
     if isinstance(reward, ExponentialReward):
         W, t = np.asarray(reward.W.numpy()), np.asarray(reward.t.numpy())[0]
