@@ -70,7 +70,7 @@ def damaged_run(tmp_path):
     """Two healthy random episodes (the model fitted to them), then one on the broken
     arm: the point of the adaptation where the factors are chosen."""
     cfg = ExperimentConfig(task="plane", env_id="unused", seed=1, episodes=4,
-                           random_episodes=2, steps=25, random_action_scale=0.3,
+                           random_episodes=2, horizon=25, random_action_scale=0.3,
                            predictions=False, quiet=True, render=False)
     exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
                      model_data=adaptation_model.damaged_arm_data)
@@ -158,7 +158,7 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
     from pilco.diagnose.replay import action_error, replay_learning
 
     cfg = ExperimentConfig(task="plane", env_id="unused", seed=2, episodes=4,
-                           random_episodes=1, steps=8, random_action_scale=0.3,
+                           random_episodes=1, horizon=8, random_action_scale=0.3,
                            model_iters=20, policy_iters=5, predictions=False, quiet=True,
                            render=False)
     run_args = argparse.Namespace(
@@ -346,7 +346,7 @@ def _healthy_run(tmp_path):
     """Two healthy random episodes and a fitted model, as before the first damaged
     episode (episode 3): the point where the replanning watch runs."""
     cfg = ExperimentConfig(task="plane", env_id="unused", seed=1, episodes=4,
-                           random_episodes=2, steps=12, random_action_scale=0.3,
+                           random_episodes=2, horizon=12, random_action_scale=0.3,
                            predictions=False, quiet=True, render=False, policy_iters=5)
     exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
                      model_data=adaptation_model.damaged_arm_data)

@@ -53,7 +53,7 @@ def build(data, start_states):
 
 def config():
     return ExperimentConfig(task="line", env_id="unused", seed=2, episodes=3,
-                            random_episodes=1, steps=STEPS, random_action_scale=0.3,
+                            random_episodes=1, horizon=STEPS, random_action_scale=0.3,
                             model_iters=20, policy_iters=4, cost_width=WIDTH,
                             predictions=False, quiet=True, render=False)
 

@@ -79,7 +79,7 @@ class StandInAgent:
 
 
 def config(**kw):
-    base = dict(task="line", env_id="unused", seed=3, episodes=4, random_episodes=1, steps=6,
+    base = dict(task="line", env_id="unused", seed=3, episodes=4, random_episodes=1, horizon=6,
                 random_action_scale=0.1, predictions=False, quiet=True, render=False,
                 success_threshold=0.05)
     base.update(kw)
@@ -413,7 +413,7 @@ def test_the_reacher_paper_code_preset():
     assert (args.horizon, args.max_action, kw["max_action"]) == (25, 0.3, 0.3)
     assert args.policy_min_rel_improvement == 0.0  # no early stop, as the script
     config = DAMAGED_REACHER.config(args)
-    assert config.steps == 25 and config.env_kwargs["max_episode_steps"] == 25
+    assert config.horizon == 25 and config.env_kwargs["max_episode_steps"] == 25
     paper = REACHER.parse(["--preset", "paper-code"])  # one cost, as the paper's code
     assert (paper.cost_width, paper.fine_cost_width, paper.limit_cost) == (1.0, 0.0, 0.0)
     assert (paper.horizon, paper.max_action) == (50, 0.1)  # the healthy script's

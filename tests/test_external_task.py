@@ -134,7 +134,7 @@ class NoDistance(gym.Env):
 
 def test_an_env_without_the_distance_is_refused_before_its_first_step(tmp_path):
     env = NoDistance()
-    cfg = ExperimentConfig(task="line", env_id="unused", seed=0, episodes=2, steps=4)
+    cfg = ExperimentConfig(task="line", env_id="unused", seed=0, episodes=2, horizon=4)
     exp = Experiment(cfg, str(tmp_path / "run"), lambda data, starts: None,
                      make_env=lambda: env)
     with pytest.raises(EnvironmentContractError,

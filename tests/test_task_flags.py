@@ -18,7 +18,7 @@ COMMON = [
     (["--seed", "-1"], "--seed: must be at least 0"),
     (["--episodes", "0"], "--episodes: must be at least 1"),
     (["--horizon", "ten"], "--horizon: expected an integer"),
-    (["--random-episodes", "-2"], "--random-episodes: must be at least 0"),
+    (["--random-episodes", "-2"], "--random-episodes: must be at least 1"),
     (["--basis-functions", "0"], "--basis-functions: must be at least 1"),
     (["--policy-iters", "-5"], "--policy-iters: must be at least 1"),
     (["--policy-iters-first", "0"], "--policy-iters-first: must be at least 1"),
@@ -65,10 +65,20 @@ def test_task_flags_refuse_bad_values(task, argv, message, capsys, tmp_path):
 
 @pytest.mark.parametrize("task", sorted(PARSERS))
 def test_edge_values_are_accepted(task, tmp_path):
-    """0 where 0 means something: all data (--max-data 0), no random episode."""
-    args = PARSERS[task](["--max-data", "0", "--random-episodes", "0", "--seed", "0",
+    """0 where 0 means something: all data (--max-data 0)."""
+    args = PARSERS[task](["--max-data", "0", "--random-episodes", "1", "--seed", "0",
                           "--policy-iters-first", "1", "--output", str(tmp_path)])
-    assert (args.max_data, args.random_episodes, args.policy_iters_first) == (0, 0, 1)
+    assert (args.max_data, args.random_episodes, args.policy_iters_first) == (0, 1, 1)
+
+
+@pytest.mark.parametrize("task", sorted(PARSERS))
+def test_the_loops_checks_are_the_flags_checks(task, capsys, tmp_path):
+    """A setting is checked once, where it is declared (LoopSettings): what the loop
+    would refuse, the command line refuses, naming it."""
+    assert "--random-episodes: must be at least 1" in refused(
+        task, ["--random-episodes", "0"], capsys, tmp_path)
+    assert "max_data must be at least 2" in refused(task, ["--max-data", "1"], capsys,
+                                                    tmp_path)
 
 
 def test_cartpole_restarts_late_by_default_and_saved_runs_resume_with_their_settings(

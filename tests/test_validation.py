@@ -630,9 +630,10 @@ def test_gp_training_stops_when_the_loss_stalls():
 def test_experiment_config_rejects_an_unknown_early_stop_rule():
     from pilco.experiment import ExperimentConfig
 
-    assert ExperimentConfig("t", "id", policy_early_stop="solved").policy_early_stop == "solved"
+    config = ExperimentConfig(task="t", env_id="id", policy_early_stop="solved")
+    assert config.policy_early_stop == "solved"
     with pytest.raises(ValueError, match="policy_early_stop must be 'always' or 'solved'"):
-        ExperimentConfig("t", "id", policy_early_stop="never")
+        ExperimentConfig(task="t", env_id="id", policy_early_stop="never")
 
 
 @pytest.mark.parametrize("scale", [1.0, 1000.0])

@@ -163,7 +163,7 @@ def predicted_run(agent, steps: int, geometry: Optional[CostGeometry],
 def multi_step_check(exp, agent, episode: Episode, geometry: Optional[CostGeometry],
                      thresholds: Thresholds) -> Dict[str, Any]:
     """Predicted distance and cost per step against the real episode's."""
-    steps = exp.config.steps
+    steps = exp.config.horizon
     pred = predicted_run(agent, steps, geometry, episode_task(agent, episode))
     real_d = np.asarray(episode.distances, dtype=np.float64)
     out: Dict[str, Any] = {"steps": steps, "real_distance": real_d}
@@ -214,7 +214,7 @@ def _on_system(view, number: int, env, seed: int) -> Episode:
     the agent's current policy from the start of ``seed``."""
     agent = view.agent
     options = view.reset_options(number) if getattr(view, "reset_options", None) else None
-    return rollout(env, lambda x: agent.compute_action(x)[0], view.config.steps, seed=seed,
+    return rollout(env, lambda x: agent.compute_action(x)[0], view.config.horizon, seed=seed,
                    distance_fn=view.distance_fn, quiet=True, reset_options=options)
 
 
@@ -228,7 +228,7 @@ def _candidate(view, number: int, geometry: Optional[CostGeometry], kind: str,
     out: Dict[str, Any] = {"start": kind, "seed": seed, "seconds": seconds,
                            "pred_cost": agent.horizon * max_reward - agent.expected_return()}
     if geometry is not None:
-        pred = predicted_run(agent, cfg.steps, geometry, task)
+        pred = predicted_run(agent, cfg.horizon, geometry, task)
         out["pred_final_distance"] = float(pred["distance_mean"][-1])
         out["pred_min_distance"] = float(np.min(pred["distance_mean"][1:]))
     if env is not None:
@@ -264,7 +264,7 @@ def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restart
                 agent.controller.randomize(seed=s)
             logger.info("optimiser check %d/%d: %s policy, %d iterations (%s)", i, len(starts),
                         "the run's" if kind == "continued" else f"random (seed {s})", iters,
-                        cfg.policy_method)
+                        cfg.policy_optimizer)
             t0 = time.perf_counter()
             # one search per candidate: the run's restarts would draw the same further
             # starts for every candidate, and the best of them would hide the candidate's
@@ -284,7 +284,7 @@ def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restart
     better = [c for c in others if run_cost - c["pred_cost"] >= needed]
     solves = (any(c["real_solved"] for c in better)
               if better and all("real_solved" in c for c in better) else None)
-    return {"iterations": iters, "method": cfg.policy_method, "horizon": agent.horizon,
+    return {"iterations": iters, "method": cfg.policy_optimizer, "horizon": agent.horizon,
             "candidates": candidates, "run_pred_cost": run_cost,
             "best": others.index(best) + 1 if best else None,
             "best_pred_cost": best["pred_cost"] if best else None, "gain": gain,

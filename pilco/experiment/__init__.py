@@ -5,7 +5,8 @@ command line shared by the tasks.
 module             job
 =================  ==============================================================
 ``episode``        :class:`Episode`, :func:`rollout`, :func:`make_env`, the env contract
-``config``         :class:`ExperimentConfig`, the settings of a run
+``settings``       :func:`setting` fields, settings classes declared once
+``config``         :class:`LoopSettings`, :class:`ExperimentConfig`, the settings of a run
 ``loop``           :class:`Experiment`, the paper's Algorithm 1 with saving/resume
 ``learning``       the model and policy phases of a learned episode, predictions
 ``scoring``        saturating cost, the solved rule, per-episode records
@@ -17,7 +18,7 @@ module             job
 
 This package logs through :mod:`logging`; nothing here prints (the tasks print their tables).
 """
-from .config import ExperimentConfig
+from .config import ExperimentConfig, LoopSettings
 from .episode import (DISTANCE_KEYS, EnvironmentContractError, Episode, make_env, rollout,
                       stack_transitions)
 from .loop import Experiment
@@ -25,5 +26,5 @@ from .scoring import PHASES, episode_solved, saturating_cost
 from .store import RunStore
 
 __all__ = ["DISTANCE_KEYS", "EnvironmentContractError", "Episode", "Experiment",
-           "ExperimentConfig", "PHASES", "RunStore", "episode_solved", "make_env", "rollout",
-           "saturating_cost", "stack_transitions"]
+           "ExperimentConfig", "LoopSettings", "PHASES", "RunStore", "episode_solved",
+           "make_env", "rollout", "saturating_cost", "stack_transitions"]

@@ -1,34 +1,38 @@
-"""The settings of one PILCO run: :class:`ExperimentConfig`."""
+"""The settings of one PILCO run: :class:`LoopSettings`, the loop's own, each declared
+once with its command-line flag, and :class:`ExperimentConfig`, those plus what a task
+fixes (its environment, its distance's cost width, its solved rule)."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Mapping, Optional
 
-__all__ = ["ExperimentConfig"]
+from .settings import non_negative_float, non_negative_int, positive_int, setting, task_settings
+
+__all__ = ["LoopSettings", "ExperimentConfig"]
 
 
-@dataclasses.dataclass
-class ExperimentConfig:
-    """Settings of a run (everything a command line sets).
+@task_settings()
+class LoopSettings:
+    """The loop's settings, each declared once: its default, its flag (``policy_iters`` is
+    ``--policy-iters``, :func:`pilco.tasks.settings.build_parser`) and its check (a
+    ``ValueError`` naming the setting when the object is made). A task's settings extend
+    them (:class:`pilco.tasks.settings.RunSettings`), and the loop reads them, by the same
+    names, from its :class:`ExperimentConfig`.
 
     Attributes:
-        task: name written in the summary.
-        env_id: gymnasium id; ``env_kwargs`` go to ``gymnasium.make``.
         seed: base seed (env resets, random actions, restarts).
         episodes: total number of episodes, random ones included.
         random_episodes: episodes with random actions at the start.
-        steps: steps per episode (the env may end an episode earlier).
-        random_action_scale: random actions uniform in ``±scale`` (``None``: uniform
-            over the env's action space).
+        horizon: steps per episode (the env may end an episode earlier) and the
+            planning horizon.
         max_data: the dynamics model learns from the first ``max_data`` transitions
             only (``None`` or 0: all of them).
         model_iters, model_restarts: L-BFGS iterations / restarts of GP training.
-        model_min_rel_improvement, model_patience: stop GP training once its loss fell by less
-            than ``model_min_rel_improvement`` (relative) over the last ``model_patience``
-            iterations
-            (``None``: always ``model_iters``).
+        model_min_rel_improvement: stop GP training once its loss fell by less than this
+            (relative) over the last ``model_patience`` iterations (``None``: always
+            ``model_iters``).
         policy_iters, policy_restarts: the same for the policy.
-        policy_method: ``"L-BFGS-B"`` or ``"BFGS"`` (see ``PILCO.optimize_policy``).
+        policy_optimizer: ``"L-BFGS-B"`` or ``"BFGS"`` (see ``PILCO.optimize_policy``).
         policy_compiler: ``"graph"`` (TensorFlow) or ``"xla"`` (``optimize_policy``'s
             ``jit_compile``).
         policy_iters_first: iterations of the first policy optimisation (``None``: as
@@ -86,113 +90,245 @@ class ExperimentConfig:
             start are used
             only once an episode has been solved (the plain objective learns the task;
             the points keep the policy working from the whole start distribution).
+        retrain_unchanged_model: train the GPs again even when their training data did
+            not change since the last training (``max_data`` reached); by default the
+            trained hyperparameters are kept (the optimum is the same).
+        quiet: no progress bars.
+    """
+
+    seed: int = setting(0, "random seed", kind=non_negative_int, group="experiment")
+    episodes: Optional[int] = setting(4, "total episodes including the random ones",
+                                      kind=positive_int, group="experiment")
+    random_episodes: int = setting(1, "episodes with random actions first",
+                                   kind=positive_int, group="experiment")
+    horizon: int = setting(50, "steps per episode and planning horizon", kind=positive_int,
+                           group="experiment")
+    quiet: bool = setting(False, "no progress bars", group="experiment")
+    policy_iters: int = setting(50, "optimiser iterations per policy optimisation",
+                                kind=positive_int, group="learning")
+    policy_restarts: int = setting(1, "policy optimisation restarts", kind=positive_int,
+                                   group="learning")
+    policy_restart_from: int = setting(
+        1, "episode (1-based, random ones counted) from which --policy-restarts apply",
+        kind=positive_int, group="learning")
+    policy_restart_step: int = setting(
+        0, "restarts added in each episode after --policy-restart-from in which restarts "
+        "run (with --policy-restart-when unsolved: the longer a run stays unsolved, the "
+        "wider its search)", kind=non_negative_int, group="learning")
+    policy_patience: int = setting(10, "iterations for --policy-min-rel-improvement",
+                                   kind=positive_int, group="learning")
+    policy_iters_first: Optional[int] = setting(
+        None, "iterations of the first policy optimisation", kind=positive_int,
+        group="learning", unset="as --policy-iters")
+    model_iters: int = setting(1000, "L-BFGS iterations of GP training", kind=positive_int,
+                               group="learning")
+    model_restarts: int = setting(1, "GP training restarts", kind=positive_int,
+                                  group="learning")
+    max_data: Optional[int] = setting(
+        None, "GP learns from the first N transitions only (0: all)",
+        kind=non_negative_int, group="learning", unset="all")
+    policy_optimizer: str = setting(
+        "L-BFGS-B", "policy optimiser (BFGS: dense update, as the MATLAB release)",
+        kind=str.upper, choices=("L-BFGS-B", "BFGS"), group="learning")
+    policy_compiler: str = setting(
+        "graph", "compile the policy objective and its gradient as a TensorFlow graph, or "
+        "whole by XLA (faster on small problems; compiled once per data-size bucket and "
+        "cached on disk: $PILCO_XLA_CACHE, default ~/.cache/pilco/xla; TensorFlow logs "
+        "'Error parsing text-format tensorflow.XlaSerializedCacheEntry' for each program it "
+        "loads from there: harmless, the load succeeds)",
+        choices=("graph", "xla"), group="learning")
+    policy_min_rel_improvement: Optional[float] = setting(
+        None, "stop a policy optimisation once its predicted return grew by less than this "
+        "fraction of it over the last --policy-patience iterations (0: never)",
+        kind=float, group="learning", unset="never")
+    policy_early_stop: str = setting(
+        "always", "apply --policy-min-rel-improvement always, or only once an episode was "
+        "solved", choices=("always", "solved"), group="learning")
+    policy_restart_when: str = setting(
+        "always", "run the --policy-restarts restarts from random policies in every policy "
+        "optimisation, or only until an episode was solved", choices=("always", "unsolved"),
+        group="learning")
+    policy_warm_start: str = setting(
+        "always", "start each policy search from the previous episode's policy always, or "
+        "only once an episode was solved (before: from a fresh random policy)",
+        choices=("always", "solved"), group="learning")
+    policy_start_mixture: Optional[float] = setting(
+        None, "split the policy objective's start distribution into 2D+1 narrower Gaussians "
+        "of the same mean and covariance, two of them this many standard deviations out "
+        "along each principal axis, so that a policy failing from the flanks of the start "
+        "distribution is seen to fail (0: off; costs 2D+1 times per evaluation)",
+        kind=non_negative_float, group="learning", unset="off")
+    policy_start_mixture_when: str = setting(
+        "solved", "use --policy-start-mixture in every policy search; only once an episode "
+        "was solved (keeping a policy that works); or, once solved, only when the plain "
+        "search's policy is fragile (its plain expected return above the mixture's by more "
+        "than --policy-fragile-gap)", choices=("always", "solved", "fragile"),
+        group="learning")
+    policy_fragile_gap: float = setting(
+        1.0, "gap between the plain and the start mixture's expected return (in steps at "
+        "full cost) above which a policy is fragile", kind=non_negative_float,
+        group="learning")
+    policy_flank_points: Optional[float] = setting(
+        None, "beside the policy objective's start distribution (one moment-matched "
+        "Gaussian), roll out the 2D known states this many standard deviations out along "
+        "each of its principal axes through the model's mean dynamics and weigh their "
+        "return with the Gaussian's, so that a policy failing from the flanks of the start "
+        "distribution is seen to fail (0: off)", kind=non_negative_float, group="learning",
+        unset="off")
+    policy_start_samples: int = setting(
+        0, "the same with this many known states drawn from the start distribution (drawn "
+        "again in every episode; 0: off)", kind=non_negative_int, group="learning")
+    policy_leave_repeat: Optional[float] = setting(
+        None, "while no episode was solved, in an episode whose policy search runs "
+        "restarts: when the search continued from the last policy wins but is predicted to "
+        "return within this much of what the last episode really did (a failure the model "
+        "already knows), run the best of the fresh searches instead (0: off; returns "
+        "summed over the horizon)", kind=non_negative_float, group="learning", unset="off")
+    policy_start_scale: Optional[float] = setting(
+        None, "beside the policy objective's start distribution, propagate one this many "
+        "times as wide (its standard deviations) and average their expected returns, so "
+        "that the objective sees the flanks of the start distribution with the model's "
+        "uncertainty there (0: off; twice the cost per evaluation)",
+        kind=non_negative_float, group="learning", unset="off")
+    policy_start_points_when: str = setting(
+        "solved", "use --policy-flank-points, --policy-start-samples and "
+        "--policy-start-scale in every policy search, or only once an episode was solved",
+        choices=("always", "solved"), group="learning")
+    model_min_rel_improvement: Optional[float] = setting(
+        None, "stop GP training once its loss fell by less than this fraction of it over "
+        "the last 10 iterations (0: never)", kind=float, group="learning", unset="never")
+    retrain_unchanged_model: bool = setting(
+        False, "train the GPs again even if their training data did not change",
+        group="learning")
+
+    def __post_init__(self):
+        """Check each setting and the relations between them (a ``ValueError`` naming the
+        setting). Settings from the command line, a preset, a resumed run's saved ones
+        and a config made in code are all checked here."""
+        _check_loop(self)
+
+
+def _whole(value, minimum: int) -> bool:
+    return not isinstance(value, bool) and isinstance(value, int) and value >= minimum
+
+
+def _check_loop(s: LoopSettings) -> None:
+    if not _whole(s.seed, 0):
+        raise ValueError(f"seed must be a whole number >= 0, got {s.seed!r}")
+    for name in ("horizon", "model_iters", "policy_iters", "model_restarts",
+                 "policy_restarts", "policy_patience", "policy_restart_from"):
+        value = getattr(s, name)
+        if not _whole(value, 1):
+            raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
+    if s.episodes is not None and not _whole(s.episodes, 1):
+        raise ValueError(f"episodes must be a whole number >= 1, got {s.episodes!r}")
+    if s.policy_iters_first is not None and not _whole(s.policy_iters_first, 1):
+        raise ValueError(f"policy_iters_first must be a whole number >= 1 or None, got "
+                         f"{s.policy_iters_first!r}")
+    for name, choices in (("policy_early_stop", ("always", "solved")),
+                          ("policy_restart_when", ("always", "unsolved")),
+                          ("policy_warm_start", ("always", "solved")),
+                          ("policy_start_points_when", ("always", "solved")),
+                          ("policy_start_mixture_when", ("always", "solved", "fragile")),
+                          ("policy_compiler", ("graph", "xla")),
+                          ("policy_optimizer", ("L-BFGS-B", "BFGS"))):
+        value = getattr(s, name)
+        if value not in choices:
+            raise ValueError(f"{name} must be {' or '.join(map(repr, choices))}, got "
+                             f"{value!r}")
+    if not _whole(s.random_episodes, 1):
+        raise ValueError("at least one random episode is needed to build the model")
+    if s.episodes is not None and s.episodes < s.random_episodes:
+        raise ValueError(f"episodes ({s.episodes}) must be >= random_episodes "
+                         f"({s.random_episodes})")
+    if (isinstance(s.policy_fragile_gap, bool)
+            or not isinstance(s.policy_fragile_gap, (int, float))
+            or not s.policy_fragile_gap >= 0):
+        raise ValueError(f"policy_fragile_gap must be a number >= 0, got "
+                         f"{s.policy_fragile_gap!r}")
+    for name in OFF_WHEN_ZERO:
+        value = getattr(s, name)
+        if value is not None and (isinstance(value, bool)
+                                  or not isinstance(value, (int, float)) or value < 0):
+            raise ValueError(f"{name} must be a number >= 0 or None, got {value!r}")
+    for name in ("policy_start_samples", "policy_restart_step"):
+        value = getattr(s, name)
+        if not _whole(value, 0):
+            raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
+    if s.max_data is not None and s.max_data != 0 and not _whole(s.max_data, 2):
+        raise ValueError(f"max_data must be at least 2 (or 0 or None: all), got "
+                         f"{s.max_data!r}")
+
+
+#: settings for which 0 means off, as None does (the config keeps None)
+OFF_WHEN_ZERO = ("policy_start_mixture", "policy_flank_points", "policy_start_scale",
+                 "policy_leave_repeat")
+
+#: names a saved run's config may use for today's settings (runs saved before the loop's
+#: settings were declared once)
+RENAMED = {"steps": "horizon", "policy_method": "policy_optimizer"}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ExperimentConfig(LoopSettings):
+    """A run's settings as the loop reads them: the :class:`LoopSettings` and what the task
+    fixes (made by :meth:`pilco.tasks.base.Task.loop_config` from a task's settings, or in
+    code). Frozen: a task that changes a setting mid-run replaces the config
+    (:func:`dataclasses.replace`). ``0`` of a setting in :data:`OFF_WHEN_ZERO` and of
+    ``max_data`` is kept as None.
+
+    Attributes:
+        task: how the run's task is found again (its name or ``module:ATTRIBUTE``),
+            written in the summary.
+        env_id: gymnasium id; ``env_kwargs`` go to ``gymnasium.make``.
+        random_action_scale: random actions uniform in ``±scale`` (``None``: uniform
+            over the env's action space).
+        model_patience: iterations of GP training's early stop
+            (``model_min_rel_improvement``).
         cost_width: width of the saturating cost of the distance (summary ``cost``).
         success_threshold: distance [m] counted as "at the target".
         solved_rule: ``"reach"``: an episode is solved when any state is within the
             threshold; ``"hold"``: when the last ``hold_steps`` states all are.
-        retrain_unchanged_model: train the GPs again even when their training data did
-            not change since the last training (``max_data`` reached); by default the
-            trained hyperparameters are kept (the optimum is the same).
         render: record frames of the final episode.
         predictions: before each learned episode, store the model's multi-step
             predictions and, after it, its one-step predictions (for the figures).
-        quiet: no progress bars.
     """
 
     task: str
     env_id: str
-    seed: int = 0
-    episodes: int = 4
-    random_episodes: int = 1
-    steps: int = 50
     env_kwargs: Dict[str, Any] = dataclasses.field(default_factory=dict)
     random_action_scale: Optional[float] = None
-    max_data: Optional[int] = None
-    model_iters: int = 1000
-    model_restarts: int = 1
-    model_min_rel_improvement: Optional[float] = None
     model_patience: int = 10
-    policy_iters: int = 50
-    policy_restarts: int = 1
-    policy_method: str = "L-BFGS-B"
-    policy_compiler: str = "graph"
-    policy_min_rel_improvement: Optional[float] = None
-    policy_patience: int = 10
-    policy_iters_first: Optional[int] = None
-    policy_early_stop: str = "always"
-    policy_restart_when: str = "always"
-    policy_restart_from: int = 1
-    policy_restart_step: int = 0
-    policy_leave_repeat: Optional[float] = None
-    policy_warm_start: str = "always"
-    policy_start_mixture: Optional[float] = None
-    policy_start_mixture_when: str = "solved"
-    policy_fragile_gap: float = 1.0
-    policy_flank_points: Optional[float] = None
-    policy_start_samples: int = 0
-    policy_start_scale: Optional[float] = None
-    policy_start_points_when: str = "solved"
     cost_width: float = 0.25
     success_threshold: float = 0.05
     solved_rule: str = "reach"
     hold_steps: int = 10
-    retrain_unchanged_model: bool = False
     render: bool = True
     predictions: bool = True
-    quiet: bool = False
 
     def __post_init__(self):
-        """Check each setting and the relations between them (a ``ValueError`` naming the
-        setting). Every way a run is configured builds this dataclass, so these checks
-        cover command-line flags and the settings a resumed run reads back alike."""
-        for name in ("episodes", "steps", "model_iters", "policy_iters", "model_restarts",
-                     "policy_restarts", "policy_patience", "hold_steps",
-                     "policy_restart_from"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
-        if self.policy_iters_first is not None and (
-                not isinstance(self.policy_iters_first, int) or self.policy_iters_first < 1):
-            raise ValueError(f"policy_iters_first must be a whole number >= 1 or None, got "
-                             f"{self.policy_iters_first!r}")
-        for name, (a, b) in (("policy_early_stop", ("always", "solved")),
-                             ("policy_restart_when", ("always", "unsolved")),
-                             ("policy_warm_start", ("always", "solved")),
-                             ("policy_start_points_when", ("always", "solved")),
-                             ("solved_rule", ("reach", "hold")),
-                             ("policy_compiler", ("graph", "xla"))):
-            value = getattr(self, name)
-            if value not in (a, b):
-                raise ValueError(f"{name} must be {a!r} or {b!r}, got {value!r}")
-        if self.random_episodes < 1:
-            raise ValueError("at least one random episode is needed to build the model")
-        if self.episodes < self.random_episodes:
-            raise ValueError(f"episodes ({self.episodes}) must be >= random_episodes "
-                             f"({self.random_episodes})")
-        if self.policy_start_mixture_when not in ("always", "solved", "fragile"):
-            raise ValueError(f"policy_start_mixture_when must be 'always', 'solved' or "
-                             f"'fragile', got {self.policy_start_mixture_when!r}")
-        if (isinstance(self.policy_fragile_gap, bool)
-                or not isinstance(self.policy_fragile_gap, (int, float))
-                or not self.policy_fragile_gap >= 0):
-            raise ValueError(f"policy_fragile_gap must be a number >= 0, got "
-                             f"{self.policy_fragile_gap!r}")
-        for name in ("policy_start_mixture", "policy_flank_points", "policy_start_scale",
-                     "policy_leave_repeat"):
-            value = getattr(self, name)
-            if value == 0:
-                setattr(self, name, None)
-            elif value is not None and (isinstance(value, bool)
-                                        or not isinstance(value, (int, float)) or value < 0):
-                raise ValueError(f"{name} must be a number >= 0 or None, got {value!r}")
-        for name in ("policy_start_samples", "policy_restart_step"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
-        if self.max_data == 0:
-            self.max_data = None
-        if self.max_data is not None and self.max_data < 2:
-            raise ValueError(f"max_data must be at least 2 (or None), got {self.max_data}")
+        super().__post_init__()
+        if self.episodes is None:
+            raise ValueError("episodes must be a whole number >= 1, got None")
+        for name in ("model_patience", "hold_steps"):
+            if not _whole(getattr(self, name), 1):
+                raise ValueError(f"{name} must be a whole number >= 1, got "
+                                 f"{getattr(self, name)!r}")
+        if self.solved_rule not in ("reach", "hold"):
+            raise ValueError(f"solved_rule must be 'reach' or 'hold', got "
+                             f"{self.solved_rule!r}")
+        for name in (*OFF_WHEN_ZERO, "max_data"):
+            if getattr(self, name) == 0:
+                object.__setattr__(self, name, None)
+
+    @classmethod
+    def from_saved(cls, values: Mapping[str, Any]) -> "ExperimentConfig":
+        """The config saved in a run's ``progress.json``: settings under a name of before
+        (:data:`RENAMED`) read under today's, settings since removed dropped, settings added
+        since at their default."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        kept = {RENAMED.get(k, k): v for k, v in values.items()}
+        return cls(**{k: v for k, v in kept.items() if k in names})
 
     def first_learned(self, number: int) -> bool:
         """Whether episode ``number`` (1-based) is the first one with a learned policy."""

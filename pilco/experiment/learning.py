@@ -115,7 +115,7 @@ def search_policy(exp, number: int, what: str = "policy", runs: int = 1) -> floa
     with progress_bar(iters * runs, f"episode {number} {what}", cfg.quiet) as bar:
         return agent.optimize_policy(
             maxiter=iters, restarts=runs, seed=exp.episode_seed(number),
-            callback=optimizer_callback(bar), method=cfg.policy_method,
+            callback=optimizer_callback(bar), method=cfg.policy_optimizer,
             min_rel_improvement=cfg.policy_early_stop_at(solved),
             patience=cfg.policy_patience, **compiler)
 
@@ -211,7 +211,7 @@ def predictions_before(exp) -> Dict[str, np.ndarray]:
     if not exp.config.predictions:
         return {}
     try:
-        M, S, R, Rv = exp.agent.predict_trajectory_with_rewards(horizon=exp.config.steps)
+        M, S, R, Rv = exp.agent.predict_trajectory_with_rewards(horizon=exp.config.horizon)
         return {"pred_mean": np.asarray(M),
                 "pred_var": np.stack([np.diag(s) for s in np.asarray(S)]),
                 "pred_reward": np.asarray(R), "pred_reward_var": np.asarray(Rv)}

@@ -134,7 +134,7 @@ class Experiment(RunRecord):
         rendered. An interrupted rollout is kept as partial data and re-raised."""
         cfg, last = self.config, number == self.config.episodes
         options = self.reset_options(number) if self.reset_options is not None else None
-        ep = rollout(self.make_env(), policy_fn, cfg.steps, seed=self.episode_seed(number),
+        ep = rollout(self.make_env(), policy_fn, cfg.horizon, seed=self.episode_seed(number),
                      reset_options=options,
                      random=policy_fn is None, random_action=random_action,
                      distance_fn=self.distance_fn,

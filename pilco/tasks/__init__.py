@@ -150,5 +150,5 @@ def open_run(directory: str):
             return found.reopen(directory)
     else:
         log.info("task %r is not reopened through its task: the saved agent is used", task)
-    return Experiment.resume(directory, ExperimentConfig(**progress["config"]),
+    return Experiment.resume(directory, ExperimentConfig.from_saved(progress["config"]),
                              build_agent=None)

@@ -19,7 +19,8 @@ import os
 import sys
 from typing import Any, Callable, ClassVar, Dict, List, Mapping, Optional, Sequence, Type
 
-from ..experiment import EnvironmentContractError, Experiment, ExperimentConfig
+from ..experiment import (EnvironmentContractError, Experiment, ExperimentConfig,
+                          LoopSettings)
 from ..experiment.report import format_episode_table, format_timing_table
 from .settings import RunSettings, build_parser, parse_settings, settings_to_dict
 
@@ -120,32 +121,14 @@ class Task:
         raise NotImplementedError
 
     def loop_config(self, settings: RunSettings, **task: Any) -> ExperimentConfig:
-        """:class:`~pilco.experiment.ExperimentConfig` of the common settings plus the
-        task's own fields ``task`` (env id and arguments, costs, the solved rule)."""
-        s = settings
-        return ExperimentConfig(
-            task=self.reference, seed=s.seed, episodes=s.episodes,
-            random_episodes=s.random_episodes, steps=s.horizon,
-            max_data=s.max_data, model_iters=s.model_iters, model_restarts=s.model_restarts,
-            model_min_rel_improvement=s.model_min_rel_improvement,
-            retrain_unchanged_model=s.retrain_unchanged_model,
-            policy_iters=s.policy_iters, policy_restarts=s.policy_restarts,
-            policy_method=s.policy_optimizer, policy_compiler=s.policy_compiler,
-            policy_min_rel_improvement=s.policy_min_rel_improvement,
-            policy_patience=s.policy_patience, policy_early_stop=s.policy_early_stop,
-            policy_restart_when=s.policy_restart_when,
-            policy_restart_from=s.policy_restart_from,
-            policy_restart_step=s.policy_restart_step,
-            policy_leave_repeat=s.policy_leave_repeat,
-            policy_warm_start=s.policy_warm_start, policy_iters_first=s.policy_iters_first,
-            policy_start_mixture=s.policy_start_mixture,
-            policy_start_mixture_when=s.policy_start_mixture_when,
-            policy_fragile_gap=s.policy_fragile_gap,
-            policy_flank_points=s.policy_flank_points,
-            policy_start_samples=s.policy_start_samples,
-            policy_start_scale=s.policy_start_scale,
-            policy_start_points_when=s.policy_start_points_when,
-            render=not s.no_render, predictions=not s.no_figures, quiet=s.quiet, **task)
+        """:class:`~pilco.experiment.ExperimentConfig` of the settings: the loop's
+        (:class:`~pilco.experiment.LoopSettings`, as they are), the run's reference
+        (:attr:`reference`), what it renders and predicts (``--no-render``,
+        ``--no-figures``) and the task's own fields ``task`` (env id and arguments, cost
+        width, the solved rule)."""
+        loop = {f.name: getattr(settings, f.name) for f in dataclasses.fields(LoopSettings)}
+        return ExperimentConfig(**loop, task=self.reference, render=not settings.no_render,
+                                predictions=not settings.no_figures, **task)
 
     #: False when the task changes its system during a run (the adaptation breaks its arm):
     #: an env made from the settings is then not the system a late episode ran on
