@@ -657,3 +657,36 @@ def test_stall_rule_is_relative_to_the_loss(scale):
 
     assert iterations_until_stop(0.002) is None
     assert iterations_until_stop(0.001) == 4
+
+
+def test_a_config_saved_under_the_names_of_before_reads_back():
+    """Runs saved before the loop's settings were declared once stored ``steps`` and
+    ``policy_method``; they resume under today's names, settings since removed dropped."""
+    import dataclasses
+
+    from pilco.experiment import ExperimentConfig
+
+    config = ExperimentConfig.from_saved(dict(task="t", env_id="e", steps=7, episodes=3,
+                                              policy_method="BFGS", a_removed_setting=1))
+    assert (config.horizon, config.policy_optimizer, config.episodes) == (7, "BFGS", 3)
+    assert ExperimentConfig.from_saved(dataclasses.asdict(config)) == config
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        config.horizon = 8
+
+
+def test_run_settings_are_the_loops_settings_extended():
+    """Each loop setting is declared once: the tasks' settings inherit it with its flag,
+    and a task's config carries it under the same name."""
+    import dataclasses
+
+    from pilco.experiment import LoopSettings
+    from pilco.tasks import get_task
+    from pilco.tasks.settings import RunSettings
+
+    loop = {f.name for f in dataclasses.fields(LoopSettings)}
+    assert loop <= {f.name for f in dataclasses.fields(RunSettings)}
+    task = get_task("cartpole")
+    settings = task.parse(["--horizon", "17", "--policy-optimizer", "bfgs"])
+    config = task.config(settings)
+    assert all(getattr(config, name) == getattr(settings, name) for name in loop)
+    assert (config.horizon, config.policy_optimizer) == (17, "BFGS")
