@@ -210,7 +210,7 @@ def test_every_help_example_runs(line, example, tmp_path, monkeypatch, capsys):
         monkeypatch.setattr(module, "configure_threads", lambda *a, **k: None)
     monkeypatch.setattr(Task, "experiment", reached)
     monkeypatch.setattr(sweep_cli, "_sweep", reached)
-    monkeypatch.setattr("pilco.diagnose.reopen.open_run", reached)
+    monkeypatch.setattr("pilco.tasks.open_run", reached)
     argv = shlex.split(example)
     assert argv[0] == "pilco"
     argv = argv[1:]

@@ -19,7 +19,8 @@ The same from Python::
     print(format_report(result))
 
 Public API
-    :func:`open_run` (a run directory as a resumed :class:`~pilco.experiment.Experiment`),
+    :func:`open_run` (a run directory as a resumed :class:`~pilco.experiment.Experiment`,
+    :func:`pilco.tasks.open_run`),
     :func:`diagnose` (the checks and the verdict of one learned episode, as a JSON-ready
     dict), :func:`write_diagnosis`, :func:`format_report` (the printed report),
     :func:`verdict` and :data:`VERDICTS` (the rules on their own), :class:`Thresholds`
@@ -30,7 +31,6 @@ Public API
 =================  ==============================================================
 module             job
 =================  ==============================================================
-``reopen``         :func:`open_run`: a run directory as a resumed experiment
 ``replay``         the agent as it was when an episode ran (saved or replayed)
 ``geometry``       the distance a saturating cost measures, the cost's slope
 ``checks``         the measurements: model (one step, open loop, multi-step),
@@ -49,15 +49,16 @@ from __future__ import annotations
 
 import importlib
 
-#: public name -> the module of this package that defines it
+#: public name -> the module that defines it, relative to this package (``open_run`` is
+#: the tasks' own, :func:`pilco.tasks.open_run`)
 _EXPORTS = {
-    "open_run": "reopen",
-    "diagnose": "diagnosis", "write_diagnosis": "diagnosis",
-    "format_report": "report",
-    "verdict": "rules", "VERDICTS": "rules",
-    "Thresholds": "thresholds",
-    "agent_of_episode": "replay", "replay_learning": "replay", "action_error": "replay",
-    "build_parser": "cli", "main": "cli",
+    "open_run": "..tasks",
+    "diagnose": ".diagnosis", "write_diagnosis": ".diagnosis",
+    "format_report": ".report",
+    "verdict": ".rules", "VERDICTS": ".rules",
+    "Thresholds": ".thresholds",
+    "agent_of_episode": ".replay", "replay_learning": ".replay", "action_error": ".replay",
+    "build_parser": ".cli", "main": ".cli",
 }
 
 __all__ = list(_EXPORTS)
@@ -67,7 +68,7 @@ def __getattr__(name: str) -> object:
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    value = getattr(importlib.import_module(module, __name__), name)
     globals()[name] = value  # later look-ups skip this function
     return value
 

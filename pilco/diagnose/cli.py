@@ -1,5 +1,5 @@
 """The command line ``pilco diagnose RUN_DIR [--episode K]`` (also ``python -m
-pilco.diagnose``): reopen a run (:func:`pilco.diagnose.reopen.open_run`), diagnose learned
+pilco.diagnose``): reopen a run (:func:`pilco.tasks.open_run`), diagnose learned
 episode K (default the last), print the report, write it to ``RUN_DIR/diagnosis.json``
 (or ``--output``) and log the verdict. A missing or wrong run directory, or an episode
 the run did not learn, is a usage error said in one line (status 2).
@@ -115,10 +115,9 @@ def main(argv: Optional[Sequence[str]] = None, prog: str = PROG) -> int:
     # episode is the run's own
     configure_threads(args.threads or None)
     from .diagnosis import diagnose, write_diagnosis
-    from .reopen import open_run
     from .report import format_report
 
-    from ..tasks import TASKS, get_task, is_task_reference
+    from ..tasks import TASKS, get_task, is_task_reference, open_run
     from ..tasks.base import RunDirectoryError
 
     try:

@@ -21,7 +21,8 @@ wrapper (``env.spec.max_episode_steps``; override with
 ``gymnasium.make(id, max_episode_steps=N)``); the envs' own limit is disabled there.
 
 Importing this package does not import mujoco or gymnasium-robotics; the Fetch env
-imports them when constructed.
+imports them when constructed. The Fetch arm's replay renderer (recorded joint angles drawn
+in a process without TensorFlow) is :mod:`pilco.envs.fetch_render`, imported on its own.
 """
 from __future__ import annotations
 

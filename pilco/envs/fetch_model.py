@@ -284,7 +284,8 @@ class FetchArm:
         MuJoCo's EGL renderer and TensorFlow crash the process (a segmentation fault)
         when both are used in it, so rendering refuses with a ``RuntimeError`` once
         TensorFlow is imported: render in a process of its own, as
-        :func:`pilco.plotting.replay_fetch_frames` does from recorded joint angles.
+        :func:`pilco.envs.fetch_render.replay_fetch_frames` does from recorded joint
+        angles.
         """
         if "tensorflow" in sys.modules and os.environ.get("PILCO_ALLOW_RENDER_WITH_TF") != "1":
             raise RuntimeError(

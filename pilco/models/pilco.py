@@ -5,7 +5,9 @@ controller and a reward (any objects following :mod:`pilco.protocols`), the init
 distribution and the horizon. The compiled rollout is :class:`pilco.models.rollout.Rollout`,
 the optimiser loop :func:`pilco.models.policy_search.search_policy`, the file layout
 :mod:`pilco.models.storage`, the index sets of the state (angles, context, what the
-dynamics model and the policy read) :class:`pilco.models.layout.StateLayout`.
+dynamics model and the policy read) :class:`pilco.models.layout.StateLayout`. The agent's
+predictions and actions are its base class :class:`pilco.models.predictions.AgentPredictions`,
+its start-distribution properties :class:`pilco.models.agent_starts.AgentStarts`.
 
 Multi-task PILCO (Deisenroth et al., ICRA 2014): declare the dimensions that hold the
 task (e.g. the target position) as ``context_indices`` (constant through an episode,
@@ -27,56 +29,33 @@ from typing import Callable, List, Optional, Sequence
 
 import gpflow
 import numpy as np
-import tensorflow as tf
 from check_shapes import check_shapes
 
 from ..runtime import reproducible_arithmetic
 from ..seeding import generator
 from ..validation import (
     check_bool,
-    check_columns,
     check_controller,
-    check_gaussian,
     check_min_rel_improvement,
     check_option,
     check_positive_int,
     check_reward,
     check_seed,
-    check_states,
     check_transitions,
-    checked_arguments,
 )
 from . import storage
+from .agent_starts import AgentStarts
 from .layout import StateLayout
 from .mgpr import MGPR
 from .policy_search import GuardedScipy, search_policy
+from .predictions import AgentPredictions
 from .rollout import Rollout
 from .smgpr import SMGPR
-from .starts import check_spread, check_start_points, check_starts, check_task
+from .starts import check_starts
 from .transitions import Transitions
 
 __all__ = ["PILCO", "POLICY_METHODS"]
 
-
-def _check_start(agent: "PILCO", arguments) -> None:
-    """The start of a prediction checked, the missing half from the task's start."""
-    m, s = agent._start(arguments["m"], arguments["s"], arguments["task"])
-    arguments.update(m=m, s=s, task=None)
-
-
-def _check_state_gaussian(agent: "PILCO", arguments) -> None:
-    arguments["m"], arguments["s"] = check_gaussian(arguments["m"], arguments["s"],
-                                                    agent.state_dim, "state")
-
-
-def _check_transition_inputs(agent: "PILCO", arguments) -> None:
-    arguments["X"] = check_columns(arguments["X"], agent.state_dim + agent.control_dim, "X",
-                                   "(state, then action)")
-
-
-def _check_measured_states(agent: "PILCO", arguments) -> None:
-    x = check_states(arguments["x"], agent.state_dim, "state")
-    arguments["x"] = x.reshape(1, -1) if x.ndim == 1 else x
 
 logger = logging.getLogger(__name__)
 
@@ -84,7 +63,7 @@ logger = logging.getLogger(__name__)
 POLICY_METHODS = ("L-BFGS-B", "BFGS")
 
 
-class PILCO(gpflow.base.Module):
+class PILCO(AgentPredictions, AgentStarts, gpflow.base.Module):
     """The PILCO agent: GP dynamics model, policy, reward and horizon.
 
     Args:
@@ -231,106 +210,6 @@ class PILCO(gpflow.base.Module):
             self._xla_points_optimizer = GuardedScipy()
 
     @property
-    def m_init(self) -> np.ndarray:
-        """Means of the start distributions, one row per task: [T, D] ([1, D] for one).
-
-        Setting it keeps the covariance(s): a shared ``S_init [D, D]`` serves any number
-        of rows; with one covariance per task the number of rows must stay T (use
-        :meth:`set_initial` to change both)."""
-        return self._rollout.m_init.numpy()
-
-    @m_init.setter
-    def m_init(self, value):
-        if self._shared_S:
-            S = self._rollout.S_init.numpy()[0]
-        else:
-            S = self._rollout.S_init.numpy()
-            rows = np.shape(value)[0] if np.ndim(value) == 2 else 1
-            if rows != self.num_tasks:
-                raise ValueError(
-                    f"m_init has {rows} start(s) but S_init holds one covariance per task "
-                    f"for {self.num_tasks} tasks: set both with set_initial(m_init, S_init)")
-        self.set_initial(value, S)
-
-    @property
-    def S_init(self) -> np.ndarray:
-        """Covariance of the start distributions: [D, D] when one serves every task (and
-        always with one task), [T, D, D] with one per task."""
-        S = self._rollout.S_init.numpy()
-        return S[0] if self._shared_S else S
-
-    @S_init.setter
-    def S_init(self, value):
-        self.set_initial(self.m_init, value)  # [D, D]: shared; [T, D, D]: one per task
-
-    @property
-    def num_tasks(self) -> int:
-        """T, the number of start distributions (tasks) the policy objective sums over."""
-        return self._rollout.num_tasks
-
-    def set_initial(self, m_init, S_init) -> None:
-        """Replace the start distributions: ``m_init`` [D], [1, D] or [T, D] and
-        ``S_init`` [D, D] (shared by all tasks) or [T, D, D] (one per task). A new number
-        of tasks retraces the policy objective at its next use."""
-        m, S, shared = check_starts(m_init, S_init, self.state_dim, "initial state")
-        if self._rollout.set_starts(m, S):
-            self._drop_compiled()  # its compiled objective is a trace
-        self._shared_S = shared
-
-    @property
-    def start_spread(self) -> Optional[float]:
-        """The policy objective's start mixture: None (each task's start distribution
-        propagated as one Gaussian, the MATLAB objective) or the spread ``a`` of
-        :func:`pilco.models.starts.start_mixture`: each start ``N(m, S)`` is split into
-        2D + 1 Gaussians of covariance ``(1 - 2a² / (2D + 1)) S``, one at ``m`` and two at
-        ``m ± a sqrt(λ_i) v_i`` along each eigenvector of ``S`` (the same mean and
-        covariance), propagated one by one; a task's expected return is their mean. A
-        policy that fails from the flanks of the start distribution is then seen to fail,
-        at 2D + 1 times the objective's cost. Setting 0 or None switches it off."""
-        return self._rollout.start_spread
-
-    @start_spread.setter
-    def start_spread(self, value) -> None:
-        self._rollout.set_start_mixture(check_spread(value, self.state_dim))
-
-    @property
-    def start_points(self) -> Optional[np.ndarray]:
-        """Known start states of the policy objective, [T, P, D], or None (the MATLAB
-        objective). Each task's P points are rolled out through the policy and the
-        model's mean dynamics (no uncertainty), and the task's total becomes the mean of
-        the expected return of its start distribution, propagated as one moment-matched
-        Gaussian, and the points' mean return (and the wide start's, :attr:`start_scale`,
-        when set). Points on the flanks of the
-        start distribution (:func:`pilco.models.starts.flank_points`) or drawn from it
-        (:func:`pilco.models.starts.start_samples`) show the objective a policy that fails
-        from part of the start distribution, which the one Gaussian averages away, at a
-        fraction of its cost (one kernel row per point and step). Set [P, D] for one
-        task, [T, P, D] for several; None switches them off. Ignored while a start
-        mixture is set (:attr:`start_spread`)."""
-        return self._rollout.start_points
-
-    @start_points.setter
-    def start_points(self, value) -> None:
-        if self._rollout.set_start_points(
-                check_start_points(value, self._rollout.num_tasks, self.state_dim)):
-            self._drop_compiled()  # its compiled objective has the number of points
-
-    @property
-    def start_scale(self) -> Optional[float]:
-        """A wide start beside the start distribution: None, or ``k``: each task's total
-        becomes the mean of the expected returns from ``N(m, S)`` and from
-        ``N(m, k² S)`` (and of its start points', :attr:`start_points`, when set), both
-        moment-matched Gaussians, so that the objective sees what happens from the start
-        distribution's flanks with the model's uncertainty there, at twice the cost.
-        Ignored while a start mixture is set. Setting 0 or None switches it off."""
-        return self._rollout.start_scale
-
-    @start_scale.setter
-    def start_scale(self, value) -> None:
-        scale = check_spread(value, self.state_dim, "start scale", mixture=False)
-        self._rollout.set_start_scale(scale)
-
-    @property
     def context_indices(self):
         """The context dimensions (constant through an episode, not predicted)."""
         return self.layout.context_indices
@@ -390,111 +269,6 @@ class PILCO(gpflow.base.Module):
         unknown: :attr:`data` and :meth:`save` raise a ValueError until :meth:`set_data`
         gives raw ones. ``noise_scales``: as in :meth:`set_data`."""
         self._transitions.replace_gp_data(self.mgpr, gp_data, noise_scales)
-
-    @checked_arguments(_check_transition_inputs)
-    @check_shapes(
-        "X: [N, DU]",
-        "return[0]: [N, D]",
-        "return[1]: [N, D]",
-    )
-    def one_step_prediction(self, X):
-        """Predicted state differences ``x_{t+1} - x_t`` at raw transition inputs.
-
-        Shapes: X [N, D + U] (raw states, angles as angles, then actions) -> mean [N, D],
-        variance [N, D] (NumPy), the GP's latent variance plus its noise variance (0 and
-        0 in the context dimensions, which do not change).
-        """
-        mean, var = self.mgpr.predict_f(self.gp_inputs(X))
-        var = np.asarray(var) + np.asarray(self.mgpr.noise_variance)
-        return self.layout.to_state(np.asarray(mean)), self.layout.to_state(var)
-
-    # -- prediction -------------------------------------------------------------------------
-    def _start(self, m, s, task):
-        """The start of a prediction checked: ``m``, ``s`` as given, the missing ones
-        from the start distribution of ``task`` (which may be omitted with one task)."""
-        if m is None or s is None:
-            if task is None:
-                if self.num_tasks > 1:
-                    raise ValueError(
-                        f"the agent has {self.num_tasks} start distributions (tasks): pass "
-                        f"task=i or the start (m, s) to predict from")
-                task = 0
-            task = check_task(task, self.num_tasks)
-            if m is None:
-                m = self._rollout.m_init.numpy()[task : task + 1]
-            if s is None:
-                s = self._rollout.S_init.numpy()[task]
-        elif task is not None:
-            raise ValueError("give either task or the start (m, s), not both")
-        return check_gaussian(m, s, self.state_dim, "initial state")
-
-    def _horizon_tensor(self, horizon):
-        H = self.horizon if horizon is None else check_positive_int(horizon, "horizon")
-        self._rollout.refresh(self.mgpr)
-        return tf.constant(H)
-
-    @checked_arguments(_check_state_gaussian)
-    @check_shapes(
-        "m: [1, D]",
-        "s: [D, D]",
-        "return[0]: [1, D]",
-        "return[1]: [D, D]",
-    )
-    def propagate(self, m, s):
-        """One predicted step. Shapes: m [1, D], s [D, D] -> m' [1, D], s' [D, D]."""
-        self._rollout.refresh(self.mgpr)
-        out = self._rollout.step(m, s, self._rollout.dynamics(), self.controller.prepare())
-        return tuple(t.numpy() for t in out)
-
-    @checked_arguments(_check_start)
-    @check_shapes(
-        "m: [1, D]",
-        "s: [D, D]",
-        "return[0]: [1, D]",
-        "return[1]: [D, D]",
-        "return[2]: [1, 1]",
-    )
-    def predict(self, m=None, s=None, horizon: Optional[int] = None,
-                task: Optional[int] = None):
-        """Predicted final state and total expected reward of steps 1..H.
-
-        Shapes: m [1, D], s [D, D] (default: the start distribution of ``task``, which
-        may be omitted when there is one) -> m_H [1, D], S_H [D, D], total_reward [1, 1].
-        """
-        out = self._rollout.total_reward(m, s, self._horizon_tensor(horizon))
-        return tuple(t.numpy() for t in out)
-
-    @checked_arguments(_check_start)
-    @check_shapes(
-        "m: [1, D]",
-        "s: [D, D]",
-        "return[0]: [H1, D]",
-        "return[1]: [H1, D, D]",
-    )
-    def predict_trajectory(self, m=None, s=None, horizon: Optional[int] = None,
-                           task: Optional[int] = None):
-        """Predicted state distributions of steps 0..H.
-
-        Shapes: m [1, D], s [D, D] -> M [H+1, D], S [H+1, D, D] (index 0 is the start);
-        defaults as :meth:`predict`.
-        """
-        M, S, _, _ = self.predict_trajectory_with_rewards(m, s, horizon)
-        return M, S
-
-    @checked_arguments(_check_start)
-    @check_shapes(
-        "m: [1, D]",
-        "s: [D, D]",
-        "return[0]: [H1, D]",
-        "return[1]: [H1, D, D]",
-        "return[2]: [H1]",
-        "return[3]: [H1]",
-    )
-    def predict_trajectory_with_rewards(self, m=None, s=None, horizon: Optional[int] = None,
-                                        task: Optional[int] = None):
-        """As :meth:`predict_trajectory`, plus the reward mean [H+1] and variance [H+1]."""
-        out = self._rollout.trajectory(m, s, self._horizon_tensor(horizon))
-        return tuple(t.numpy() for t in out)
 
     # -- learning ---------------------------------------------------------------------------
     def optimize_models(self, maxiter: int = 1000, restarts: int = 1, seed: Optional[int] = None,
@@ -608,20 +382,6 @@ class PILCO(gpflow.base.Module):
             raise ValueError(f"policy search run {run} evaluated no finite point")
         self._last_search.restore_run_best(self.controller.trainable_variables, int(run))
         return returns[run]
-
-    # -- acting -----------------------------------------------------------------------------
-    @checked_arguments(_check_measured_states)
-    @check_shapes(
-        "x: [N, D]",
-        "return: [N, U]",
-    )
-    def compute_action(self, x) -> np.ndarray:
-        """The policy's action at measured states: x [N, D] -> u [N, U], one state [D]
-        or [1, D] -> [1, U] (the whole state, context included; the policy reads its
-        dimensions). The same actions as the exported policy
-        (:func:`pilco.deploy.load_policy`), row by row."""
-        rows = [self._rollout.action(tf.convert_to_tensor(row[None, :])).numpy() for row in x]
-        return np.concatenate(rows, axis=0)
 
     # -- files ------------------------------------------------------------------------------
     def save(self, path) -> str:

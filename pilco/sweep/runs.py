@@ -326,6 +326,80 @@ def _sigterm_as_interrupt():
     return signal_handler(signal.SIGTERM, handler)
 
 
+def _collect(ref, pending: Dict[Any, RunSpec], outcome: SweepOutcome, max_retries: int,
+             on_result: Optional[Callable[[RunSpec, Dict[str, Any]], None]],
+             stopped: bool = False) -> None:
+    """Record the result of ``ref`` (a finished task) in its run's directory and in
+    ``outcome``; once ``stopped``, a failure is the interrupt's and raises instead.
+    The run leaves ``pending`` only when it is recorded."""
+    import ray
+
+    spec = pending[ref]
+    try:
+        result = ray.get(ref)
+    except (ray.exceptions.RayError, RunFailed) as err:
+        if stopped:
+            raise
+        failure = _failure(spec, err, max_retries + 1)
+        _record(spec, status="failed", **failure)
+        outcome.failed.append((spec, failure))
+        logger.warning("%s failed after %d attempt(s): %s", spec.name,
+                       failure["attempts"], failure["error"])
+    else:
+        summary = result["summary"]
+        write_json_atomic(os.path.join(spec.directory, SUMMARY), summary)
+        _record(spec, status="finished",
+                **{k: v for k, v in result.items() if k != "summary"})
+        outcome.finished.append(spec)
+        if on_result is not None:
+            on_result(spec, summary)
+    del pending[ref]
+
+
+def _submit(remote, specs: Sequence[RunSpec], cpus_per_run: int,
+            pending: Dict[Any, RunSpec]) -> None:
+    """Submit a Ray task of ``remote`` for every run of ``specs``, each into ``pending``
+    as it goes, after recording it pending in its directory."""
+    for spec in specs:
+        # a record of this run (same task, seed and flags) means that what the
+        # directory holds was saved by this run: it continues from there
+        old = read_json(os.path.join(spec.directory, RUN_RECORD)) or {}
+        resume_saved = (old.get("task"), old.get("seed"), old.get("flags")) == \
+            (spec.task, spec.seed, list(spec.flags))
+        # until the driver records it finished, whatever the run leaves in
+        # its directory (a summary written when it was stopped) is no result
+        _record(spec, status="pending")
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(os.path.join(spec.directory, ATTEMPTS))
+        pending[remote.remote(spec, cpus_per_run, resume_saved)] = spec
+
+
+def _stop_pending(pending: Dict[Any, RunSpec], outcome: SweepOutcome,
+                  collect: Callable[..., None]) -> None:
+    """After an interrupt: cancel the unfinished tasks, keep the runs that finish within
+    a few seconds (``collect(ref, stopped=True)``), record the others interrupted."""
+    import ray
+
+    outcome.interrupted = True
+    logger.warning("interrupted: cancelling %d unfinished run(s); finished "
+                   "runs are kept", len(pending))
+    for ref in pending:
+        with contextlib.suppress(Exception):
+            ray.cancel(ref, force=False)
+    # give running tasks a moment to stop their processes; a run that
+    # finishes meanwhile is kept as finished
+    with contextlib.suppress(Exception, KeyboardInterrupt):
+        done, _ = ray.wait(list(pending), num_returns=len(pending),
+                           timeout=10.0)
+        for ref in done:
+            with contextlib.suppress(ray.exceptions.RayError, RunFailed):
+                collect(ref, stopped=True)
+    outcome.not_run.extend(pending.values())
+    for spec in pending.values():
+        with contextlib.suppress(OSError):
+            _record(spec, status="interrupted")
+
+
 def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int = 1,
             progress: bool = True,
             on_result: Optional[Callable[[RunSpec, Dict[str, Any]], None]] = None
@@ -350,73 +424,21 @@ def execute(specs: Sequence[RunSpec], *, cpus_per_run: int = 1, max_retries: int
                                              retry_exceptions=True)
     outcome = SweepOutcome()
     pending: Dict[Any, RunSpec] = {}
-
-    def collect(ref, stopped: bool = False) -> None:
-        """Record the result of ``ref`` (a finished task) in its run's directory and in
-        ``outcome``; once ``stopped``, a failure is the interrupt's and raises instead.
-        The run leaves ``pending`` only when it is recorded."""
-        spec = pending[ref]
-        try:
-            result = ray.get(ref)
-        except (ray.exceptions.RayError, RunFailed) as err:
-            if stopped:
-                raise
-            failure = _failure(spec, err, max_retries + 1)
-            _record(spec, status="failed", **failure)
-            outcome.failed.append((spec, failure))
-            logger.warning("%s failed after %d attempt(s): %s", spec.name,
-                           failure["attempts"], failure["error"])
-        else:
-            summary = result["summary"]
-            write_json_atomic(os.path.join(spec.directory, SUMMARY), summary)
-            _record(spec, status="finished",
-                    **{k: v for k, v in result.items() if k != "summary"})
-            outcome.finished.append(spec)
-            if on_result is not None:
-                on_result(spec, summary)
-        del pending[ref]
-
+    collect = functools.partial(_collect, pending=pending, outcome=outcome,
+                                max_retries=max_retries, on_result=on_result)
     bar = tqdm(total=len(specs), unit="run", desc="sweep", file=sys.stderr,
                disable=not progress, dynamic_ncols=True)
     try:
         with _sigterm_as_interrupt():
             try:
-                for spec in specs:
-                    # a record of this run (same task, seed and flags) means that what the
-                    # directory holds was saved by this run: it continues from there
-                    old = read_json(os.path.join(spec.directory, RUN_RECORD)) or {}
-                    resume_saved = (old.get("task"), old.get("seed"), old.get("flags")) == \
-                        (spec.task, spec.seed, list(spec.flags))
-                    # until the driver records it finished, whatever the run leaves in
-                    # its directory (a summary written when it was stopped) is no result
-                    _record(spec, status="pending")
-                    with contextlib.suppress(FileNotFoundError):
-                        os.remove(os.path.join(spec.directory, ATTEMPTS))
-                    pending[remote.remote(spec, cpus_per_run, resume_saved)] = spec
+                _submit(remote, specs, cpus_per_run, pending)
                 while pending:
                     done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
                     for ref in done:
                         collect(ref)
                         bar.update(1)
             except KeyboardInterrupt:
-                outcome.interrupted = True
-                logger.warning("interrupted: cancelling %d unfinished run(s); finished "
-                               "runs are kept", len(pending))
-                for ref in pending:
-                    with contextlib.suppress(Exception):
-                        ray.cancel(ref, force=False)
-                # give running tasks a moment to stop their processes; a run that
-                # finishes meanwhile is kept as finished
-                with contextlib.suppress(Exception, KeyboardInterrupt):
-                    done, _ = ray.wait(list(pending), num_returns=len(pending),
-                                       timeout=10.0)
-                    for ref in done:
-                        with contextlib.suppress(ray.exceptions.RayError, RunFailed):
-                            collect(ref, stopped=True)
-                outcome.not_run.extend(pending.values())
-                for spec in pending.values():
-                    with contextlib.suppress(OSError):
-                        _record(spec, status="interrupted")
+                _stop_pending(pending, outcome, collect)
     finally:
         bar.close()
     return outcome

@@ -275,11 +275,11 @@ class ReacherTask(Task):
     def render_fn(self, s: ReacherSettings, env):
         """The final episode's frames, replayed from its joint angles in another process
         (MuJoCo's EGL renderer and TensorFlow cannot share a process)."""
-        from .. import plotting
+        from ..envs.fetch_render import replay_fetch_frames
 
         def render(episode):  # the target of the episode just run
-            return plotting.replay_fetch_frames(episode.states[:, 3:10],
-                                                env.unwrapped.target, *s.render_size)
+            return replay_fetch_frames(episode.states[:, 3:10], env.unwrapped.target,
+                                       *s.render_size)
 
         return render
 
