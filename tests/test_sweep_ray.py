@@ -27,8 +27,9 @@ def local_ray():
 
 
 COMMAND = ["cartpole", "--seeds", "0-1", "--no-progress", "--max-retries", "0",
-           # max_data=1 passes the flag check (an integer >= 0), the task's settings
-           # reject it when it starts (at least 2 transitions, or 0 for all)
+           # max_data=1 passes the sweep's flag check (an integer >= 0); the run's
+           # settings check refuses it when the run parses them (at least 2 transitions,
+           # or 0 for all): a usage error, exit status 2
            "--grid", "max_data=0,1"]
 OK, BAD = "max_data=0", "max_data=1"
 
@@ -70,10 +71,10 @@ def test_a_failing_run_is_reported_with_its_error_and_the_others_kept(sweep):
     bad = report["results"][BAD]
     assert (bad["finished"], bad["failed"], bad["success_rate"]) == (0, 2, None)
     assert sorted((f["setting"], f["seed"], f["returncode"]) for f in report["failures"]) == [
-        (BAD, 0, 1), (BAD, 1, 1)]
+        (BAD, 0, 2), (BAD, 1, 2)]
     for failure in report["failures"]:
         assert failure["attempts"] == 1
-        assert "exit code 1" in failure["error"]
+        assert "exit code 2" in failure["error"]
         assert "max_data must be at least 2" in failure["stderr_tail"]
     assert load(out / BAD / "seed-0" / "sweep-run.json")["status"] == "failed"
     assert report["results"][OK]["finished"] == 2
