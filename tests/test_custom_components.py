@@ -81,6 +81,7 @@ def agent(reward=None):
 def test_custom_controller_and_reward_round_trip_exactly(tmp_path, nested):
     reward = QuadraticCost([1.0, 0.0], weight=2.0)
     reward.w.assign(0.35)  # a trained value, not the config's: restored from the file
+    gpflow.set_trainable(reward.w, False)
     if nested:
         reward = CombinedRewards(D, [ExponentialReward(D, t=[[1.0, 0.0]]), reward],
                                  coefs=[1.0, 0.5])
@@ -93,6 +94,7 @@ def test_custom_controller_and_reward_round_trip_exactly(tmp_path, nested):
     assert not b.controller.b.trainable and b.controller.W.trainable
     custom = b.reward.base_rewards[1] if nested else b.reward
     assert type(custom) is QuadraticCost and custom.w.numpy() == 0.35
+    assert not custom.w.trainable
     assert b.expected_return() == a.expected_return()
     for x, y in zip(a.predict(), b.predict()):
         np.testing.assert_array_equal(x, y)

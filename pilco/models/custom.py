@@ -13,15 +13,16 @@ registration):
   mymod:TASK``; a class defined in a script's ``__main__`` loads only in that script).
 
 Its ``gpflow.Parameter`` s (:func:`gpflow.utilities.parameter_dict`, by attribute path)
-are stored with their values, raw variables and trainable flags and assigned after the
-object is rebuilt, so a trained parameter comes back as trained, bit for bit.
+are stored as :mod:`pilco.models.storage` stores every parameter (values, raw variables,
+trainable flags) and assigned after the object is rebuilt, so a trained parameter comes
+back as trained, bit for bit.
 """
 from __future__ import annotations
 
 import importlib
 import json
 import logging
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, Tuple
 
 import gpflow
 import numpy as np
@@ -54,12 +55,11 @@ def _json_ready(value, where: str):
                     f"numbers, strings, lists, dicts or NumPy arrays")
 
 
-def custom_spec(obj, arrays: Dict[str, np.ndarray],
-                trainable: Optional[Dict[str, List[bool]]], prefix: str, what: str) -> dict:
-    """The metadata of ``obj`` (a ``what``, e.g. "reward") under the protocol; its
-    parameters go into ``arrays`` (and their trainable flags into ``trainable``, unless
-    None) under keys starting with ``prefix``.
-    TypeError naming the missing piece when ``obj`` does not follow it."""
+def custom_spec(obj, what: str) -> Tuple[dict, Dict[str, gpflow.Parameter]]:
+    """The metadata of ``obj`` (a ``what``, e.g. "reward") under the protocol, and its
+    parameters by path, which the caller stores (:mod:`pilco.models.storage`, as it
+    stores every parameter). TypeError naming the missing piece when ``obj`` does not
+    follow the protocol."""
     kind = type(obj)
     name = f"{kind.__module__}:{kind.__qualname__}"
     if not is_storable(obj):
@@ -75,20 +75,13 @@ def custom_spec(obj, arrays: Dict[str, np.ndarray],
     config = _json_ready(obj.get_config(), f"{kind.__name__}.get_config()")
     json.dumps(config)
     params = gpflow.utilities.parameter_dict(obj)
-    for path, p in params.items():
-        key = prefix + "param" + path
-        arrays[key] = p.numpy()
-        arrays[key + "_raw"] = p.unconstrained_variable.numpy()
-        if trainable is not None:
-            trainable[key] = [bool(p.trainable)]
-    return dict(type=CUSTOM, cls=name, config=config, params=sorted(params))
+    return dict(type=CUSTOM, cls=name, config=config, params=sorted(params)), params
 
 
-def build_custom(spec: dict, arrays: Dict[str, np.ndarray],
-                 trainable: Optional[Dict[str, List[bool]]], prefix: str, path,
-                 what: str) -> Any:
-    """The ``what`` stored by :func:`custom_spec`, rebuilt and its parameters assigned.
-    ValueError naming the class when it cannot be imported or rebuilt."""
+def build_custom(spec: dict, path, what: str) -> Tuple[Any, Dict[str, gpflow.Parameter]]:
+    """The ``what`` stored by :func:`custom_spec`, rebuilt from its config, and its
+    parameters by path, to which the caller assigns the stored values. ValueError naming
+    the class when it cannot be imported or rebuilt, or lacks a saved parameter."""
     name = spec.get("cls", "")
     module, _, qualname = name.partition(":")
     try:
@@ -110,17 +103,4 @@ def build_custom(spec: dict, arrays: Dict[str, np.ndarray],
     if missing:
         raise ValueError(f"{path}: the rebuilt {what} {name!r} has no parameter(s) "
                          f"{', '.join(missing)} that were saved")
-    for p_path in spec.get("params", []):
-        key = prefix + "param" + p_path
-        if key not in arrays:
-            raise ValueError(f"{path} is incomplete: entry {key!r} is missing")
-        p = params[p_path]
-        raw = arrays.get(key + "_raw")
-        if raw is not None and raw.shape == tuple(p.unconstrained_variable.shape):
-            p.unconstrained_variable.assign(raw)
-        else:
-            p.assign(arrays[key])
-        flags = (trainable or {}).get(key)
-        if flags:
-            gpflow.set_trainable(p, bool(flags[0]))
-    return obj
+    return obj, params

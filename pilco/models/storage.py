@@ -98,6 +98,22 @@ def _get_params(params: Sequence[gpflow.Parameter], arrays, trainable, key: str,
             gpflow.set_trainable(p, bool(flags[i]))
 
 
+def _custom_spec(obj, arrays, trainable, prefix: str, what: str) -> dict:
+    """A controller or reward of another class (:mod:`pilco.models.custom`): its metadata,
+    its parameters stored under ``PREFIXparam.PATH`` as every parameter is."""
+    spec, params = custom_spec(obj, what)
+    for name, p in params.items():
+        _put_params(arrays, trainable, f"{prefix}param{name}", [p])
+    return spec
+
+
+def _build_custom(spec: dict, arrays, trainable, prefix: str, path, what: str):
+    obj, params = build_custom(spec, path, what)
+    for name in spec.get("params", []):
+        _get_params([params[name]], arrays, trainable, f"{prefix}param{name}", path)
+    return obj
+
+
 # -- components -----------------------------------------------------------------------------
 def _squash_name(squash):
     if squash is None:
@@ -140,7 +156,7 @@ def _controller_spec(controller, arrays, trainable) -> dict:
         _put_params(arrays, trainable, "controller/W", [controller.W])
         _put_params(arrays, trainable, "controller/b", [controller.b])
     else:
-        return custom_spec(controller, arrays, trainable, "controller/", "controller")
+        return _custom_spec(controller, arrays, trainable, "controller/", "controller")
     arrays["controller/max_action"] = np.asarray(controller.max_action, dtype=np.float64)
     return spec
 
@@ -148,7 +164,7 @@ def _controller_spec(controller, arrays, trainable) -> dict:
 def _build_controller(spec: dict, arrays, trainable, path):
     kind = spec.get("type")
     if kind == CUSTOM:
-        return build_custom(spec, arrays, trainable, "controller/", path, "controller")
+        return _build_custom(spec, arrays, trainable, "controller/", path, "controller")
     squash = spec.get("squash")
     if squash is not None and squash not in _SQUASHES:
         raise ValueError(f"{path}: unknown squash function {squash!r}")
@@ -180,7 +196,7 @@ def _build_controller(spec: dict, arrays, trainable, path):
     return c
 
 
-def _reward_spec(reward, arrays, prefix: str) -> dict:
+def _reward_spec(reward, arrays, trainable, prefix: str) -> dict:
     kind = type(reward)
     if kind is ExponentialReward:
         arrays[prefix + "W"] = reward.W.numpy()
@@ -195,7 +211,7 @@ def _reward_spec(reward, arrays, prefix: str) -> dict:
         return dict(type="LinearReward", state_dim=reward.state_dim)
     if kind is CombinedRewards:
         arrays[prefix + "coefs"] = reward.coefs.numpy()
-        parts = [_reward_spec(r, arrays, f"{prefix}{i}/")
+        parts = [_reward_spec(r, arrays, trainable, f"{prefix}{i}/")
                  for i, r in enumerate(reward.base_rewards)]
         return dict(type="CombinedRewards", state_dim=reward.state_dim, rewards=parts)
     if kind is CartPoleReward:
@@ -205,14 +221,14 @@ def _reward_spec(reward, arrays, prefix: str) -> dict:
         arrays[prefix + "A"] = reward.A.numpy()
         arrays[prefix + "b"] = reward.b.numpy()
         return dict(type="LinearMapReward", state_dim=reward.state_dim,
-                    base=_reward_spec(reward.base_reward, arrays, prefix + "base/"))
-    return custom_spec(reward, arrays, None, prefix, "reward")
+                    base=_reward_spec(reward.base_reward, arrays, trainable, prefix + "base/"))
+    return _custom_spec(reward, arrays, trainable, prefix, "reward")
 
 
-def _build_reward(spec: dict, arrays, prefix: str, path):
+def _build_reward(spec: dict, arrays, trainable, prefix: str, path):
     kind = spec.get("type")
     if kind == CUSTOM:
-        return build_custom(spec, arrays, None, prefix, path, "reward")
+        return _build_custom(spec, arrays, trainable, prefix, path, "reward")
     if kind == "ExponentialReward":
         return ExponentialReward(spec["state_dim"], W=_get(arrays, prefix + "W", path),
                                  t=_get(arrays, prefix + "t", path))
@@ -223,13 +239,13 @@ def _build_reward(spec: dict, arrays, prefix: str, path):
     if kind == "LinearReward":
         return LinearReward(spec["state_dim"], W=_get(arrays, prefix + "W", path))
     if kind == "CombinedRewards":
-        parts = [_build_reward(s, arrays, f"{prefix}{i}/", path)
+        parts = [_build_reward(s, arrays, trainable, f"{prefix}{i}/", path)
                  for i, s in enumerate(spec["rewards"])]
         return CombinedRewards(spec["state_dim"], parts, coefs=_get(arrays, prefix + "coefs", path))
     if kind == "CartPoleReward":
         return CartPoleReward(pendulum_length=spec["pendulum_length"], width=spec["width"])
     if kind == "LinearMapReward":
-        base = _build_reward(spec["base"], arrays, prefix + "base/", path)
+        base = _build_reward(spec["base"], arrays, trainable, prefix + "base/", path)
         return LinearMapReward(spec["state_dim"], base, _get(arrays, prefix + "A", path),
                                _get(arrays, prefix + "b", path))
     raise ValueError(f"{path}: unknown reward type {kind!r}")
@@ -306,7 +322,7 @@ def agent_arrays(agent) -> Dict[str, np.ndarray]:
                             else int(agent.num_induced_points)),
         policy_input_noise=bool(agent.policy_input_noise),
         controller=_controller_spec(agent.controller, arrays, trainable),
-        reward=_reward_spec(agent.reward, arrays, "reward/"),
+        reward=_reward_spec(agent.reward, arrays, trainable, "reward/"),
         gp=_gp_spec(agent.mgpr, arrays, trainable),
         trainable=trainable,
         **layout,
@@ -328,7 +344,7 @@ def read_agent(path) -> Tuple[Dict[str, Any], Any]:
     kwargs = dict(
         data=(_get(arrays, "data/X", path), _get(arrays, "data/Y", path)),
         controller=_build_controller(meta["controller"], arrays, trainable, path),
-        reward=_build_reward(meta["reward"], arrays, "reward/", path),
+        reward=_build_reward(meta["reward"], arrays, trainable, "reward/", path),
         horizon=meta["horizon"], m_init=_get(arrays, "m_init", path),
         S_init=_get(arrays, "S_init", path), angle_indices=meta["angle_indices"],
         num_induced_points=meta["num_induced_points"],
