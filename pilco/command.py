@@ -48,16 +48,13 @@ def _task_names() -> List[str]:
 
 
 def _pick(argv: List[str], choices: Sequence[str], usage: str, prog: str,
-          what: str, references: bool = False) -> Optional[int]:
-    """The exit status when ``argv`` does not start with one of ``choices`` (or, with
-    ``references``, a ``module:ATTRIBUTE``): 0 after printing ``usage`` for
-    ``-h``/``--help``, 2 after a usage error naming the missing or unknown ``what``; None
-    when it does."""
+          what: str) -> Optional[int]:
+    """The exit status when ``argv`` does not start with one of ``choices``: 0 after
+    printing ``usage`` for ``-h``/``--help``, 2 after a usage error naming the missing or
+    unknown ``what``; None when it does."""
     if argv and argv[0] in ("-h", "--help"):
         sys.stdout.write(usage)
         return 0
-    if references and argv and ":" in argv[0]:
-        return None
     if not argv or argv[0] not in choices:
         problem = f"no {what} given" if not argv else f"unknown {what} {argv[0]!r}"
         sys.stderr.write(f"{usage.splitlines()[0]}\n{prog}: error: {problem}; choose one "
@@ -71,10 +68,12 @@ def _run(argv: List[str]) -> int:
     usage = (f"usage: {PROG} run TASK [task flags]\n"
              f"       {PROG} run TASK --help   (the task's flags)\n"
              f"tasks: {', '.join(names)}, or package.module:ATTRIBUTE (a task of your own)\n")
-    status = _pick(argv, names, usage, f"{PROG} run", "task", references=True)
-    if status is not None:
-        return status
-    from .tasks import get_task
+    from .tasks import get_task, is_task_reference
+
+    if not (argv and is_task_reference(argv[0])):  # a task of the user's: get_task checks it
+        status = _pick(argv, names, usage, f"{PROG} run", "task")
+        if status is not None:
+            return status
 
     try:
         task = get_task(argv[0])

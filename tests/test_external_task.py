@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -103,7 +104,16 @@ def test_run_reload_diagnose_and_sweep(user_dir, monkeypatch):
     assert diagnosis.returncode == 0, diagnosis.stderr
     report = json.loads((user_dir / "run" / "diagnosis.json").read_text())
     assert report["task"] == "my_task:TASK" and report["episode"] == 2
-    assert "saved agent is used" not in diagnosis.stderr  # reopened through the task
+    assert "reopened from its saved agent" not in diagnosis.stderr  # through the task
+
+    # a run whose task module is gone is diagnosed from its saved agent, said once
+    shutil.copytree(user_dir / "run", user_dir / "orphan")
+    progress = json.loads((user_dir / "orphan" / "progress.json").read_text())
+    progress["config"]["task"] = "no_such_module_xyz:TASK"
+    (user_dir / "orphan" / "progress.json").write_text(json.dumps(progress))
+    orphan = pilco("diagnose", "orphan", "--restarts", "0", "--starts", "0", cwd=user_dir)
+    assert orphan.returncode == 0, orphan.stderr
+    assert orphan.stderr.count("reopened from its saved agent") == 1, orphan.stderr
 
     # the sweep's runs are processes of their own, started by Ray's workers
     sweep = pilco("sweep", "my_task:TASK", "--seeds", "0-1", "--num-cpus", "2",

@@ -117,7 +117,7 @@ def main(argv: Optional[Sequence[str]] = None, prog: str = PROG) -> int:
     from .diagnosis import diagnose, write_diagnosis
     from .report import format_report
 
-    from ..tasks import TASKS, get_task, is_task_reference, open_run
+    from ..tasks import get_task, open_run
     from ..tasks.base import RunDirectoryError
 
     try:
@@ -136,8 +136,11 @@ def main(argv: Optional[Sequence[str]] = None, prog: str = PROG) -> int:
                                   f"{', '.join(map(str, learned)) or 'none'})")
     rollouts = not args.no_rollouts
     task = exp.config.task
-    if rollouts and (task in TASKS or is_task_reference(task)) and \
-            not get_task(task).system_from_settings:
+    try:
+        changes_system = not get_task(task).system_from_settings
+    except (ValueError, TypeError):  # reopened from its saved agent (pilco.tasks.open_run)
+        changes_system = False
+    if rollouts and changes_system:
         logger.warning("the %s task changes its system during the run: the candidate "
                        "policies are not run on the real system", task)
         rollouts = False

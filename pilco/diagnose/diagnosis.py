@@ -58,9 +58,14 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
     if rollouts:
         try:
             env = view.make_env()
+            # the env contract, before any rollout: a run reopened from its saved agent
+            # makes its env from the config's id, without the task's wrapper
+            view.distance_fn(env, env.reset()[1])
         except Exception as err:  # the rollouts are optional evidence
-            logger.warning("the run's environment cannot be made (%s): the candidate "
-                           "policies are not run on the real system", err)
+            env = None
+            logger.warning("the run's environment cannot be made or reports no distance "
+                           "(%s): the candidate policies are not run on the real system",
+                           err)
     logger.info("episode %d: the policy from %d other starts", number, starts if env else 0)
     start = start_check(view, number, env, starts)
     optimiser = optimiser_check(view, number, geometry, restarts, seed, env, thresholds,

@@ -138,17 +138,13 @@ def open_run(directory: str):
 
     progress = RunStore(directory).load_progress()
     task = progress["config"]["task"]
-    log = logging.getLogger(__name__)
-    if task in TASKS:
-        return get_task(task).reopen(directory)
-    if is_task_reference(task):
-        try:
-            found = get_task(task)
-        except (ValueError, TypeError) as err:
-            log.warning("%s; the run is reopened from its saved agent", err)
-        else:
-            return found.reopen(directory)
-    else:
-        log.info("task %r is not reopened through its task: the saved agent is used", task)
-    return Experiment.resume(directory, ExperimentConfig.from_saved(progress["config"]),
-                             build_agent=None)
+    try:
+        found = get_task(task)
+    except (ValueError, TypeError) as err:
+        # a reference that no longer imports is worth a warning; a script's own task is not
+        log = logging.getLogger(__name__)
+        (log.warning if is_task_reference(task) else log.info)(
+            "%s; the run is reopened from its saved agent", err)
+        return Experiment.resume(directory, ExperimentConfig.from_saved(progress["config"]),
+                                 build_agent=None)
+    return found.reopen(directory)
