@@ -83,6 +83,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import subprocess
@@ -528,7 +529,8 @@ def op_overhead(repeats: int, lengths=(1000, 3000)) -> float:
     """Seconds per executed tiny operation inside a ``tf.function``: the difference
     between chains of ``lengths`` alternating multiplies and subtractions of 4 x 4
     matrices (which Grappler cannot merge, unlike a chain of additions or of one unary
-    function), per operation added; the fastest of ``repeats`` calls each."""
+    function), per operation added; the fastest of ``repeats`` calls each. The two chains'
+    calls alternate, so that a burst of load elsewhere on the machine meets both alike."""
     import tensorflow as tf
 
     def chain(k):
@@ -541,10 +543,15 @@ def op_overhead(repeats: int, lengths=(1000, 3000)) -> float:
 
     x = tf.ones([4, 4], tf.float64)
     y = tf.fill([4, 4], tf.constant(1.0 + 1e-9, tf.float64))
-    best = []
-    for k in lengths:
-        f = chain(k)
-        best.append(min(_best_seconds(lambda: f(x, y).numpy(), repeats)))
+    calls = [chain(k) for k in lengths]
+    best = [math.inf, math.inf]
+    for f in calls:  # warm-up: tracing and compilation
+        f(x, y).numpy()
+    for _ in range(repeats):
+        for i, f in enumerate(calls):
+            t0 = time.perf_counter()
+            f(x, y).numpy()
+            best[i] = min(best[i], time.perf_counter() - t0)
     return (best[1] - best[0]) / (lengths[1] - lengths[0])
 
 

@@ -118,9 +118,10 @@ def test_quick_path_functions_on_a_tiny_problem(bench):
     assert _positive_finite(bench.pair_block_seconds(2, 3, 4, repeats=1))
     assert all(_positive_finite(v) for v in bench.matmul_rates(64, repeats=1).values())
     assert all(_positive_finite(v) for v in bench.elementwise_rates(4096, repeats=1).values())
-    # the slope of two minima: 20 calls each (as the script's least), so that a loaded
-    # machine's delays do not reach every call of the shorter chain (3 were not enough)
-    assert _positive_finite(bench.op_overhead(repeats=20, lengths=(100, 500)))
+    # the slope of two minima over alternating calls, 20 each (as the script's least), so
+    # that a loaded machine's delays do not reach every call of one chain; 900 operations
+    # apart, so that the difference is well above a timer's jitter
+    assert _positive_finite(bench.op_overhead(repeats=20, lengths=(100, 1000)))
 
 
 def _setting(peak, seconds, pair_groups, counted):
