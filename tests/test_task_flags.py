@@ -2,6 +2,7 @@
 before any environment, model or TensorFlow work starts; a resumed run keeps the settings
 it was saved with, and a setting it lacks takes today's default."""
 import json
+import re
 
 import pytest
 
@@ -136,3 +137,38 @@ def test_the_reacher_arms_stop_a_stalled_policy_search_and_the_others_do_not(tmp
     assert early_stop(REACHER.parse(["--policy-min-rel-improvement", "0", *out]))[0] == 0.0
     adapted = ADAPTATION.parse(out)
     assert (adapted.policy_min_rel_improvement, adapted.policy_patience) == (0.01, 5)
+
+
+@pytest.mark.parametrize("changes, message", [
+    # a task's own settings, by the rule of their declaration's kind or choices
+    ({"cost_width": 0.0}, "cost_width must be a number > 0, got 0.0"),
+    ({"start_std": -0.1}, "start_std must be a number >= 0, got -0.1"),
+    ({"hold_steps": 2.5}, "hold_steps must be a whole number >= 1, got 2.5"),
+    ({"squash": "tanh"}, "squash must be 'sat' or 'sin', got 'tanh'"),
+    ({"cost_width": float("nan")}, "cost_width must be a number > 0"),
+    # the loop's, with None where None is the default
+    ({"policy_start_scale": -1.0}, "policy_start_scale must be a number >= 0 or None"),
+    ({"policy_iters_first": 0}, "policy_iters_first must be a whole number >= 1 or None"),
+    ({"policy_compiler": "jit"}, "policy_compiler must be 'graph' or 'xla'"),
+    ({"seed": True}, "seed must be a whole number >= 0, got True"),
+])
+def test_settings_made_in_code_meet_their_declarations(changes, message, tmp_path):
+    """Each setting is checked by what its declaration says (the same rule as its flag),
+    for the loop's settings and a task's own alike, however the settings object is made."""
+    import dataclasses
+
+    args = CARTPOLE.parse(["--output", str(tmp_path)])
+    with pytest.raises(ValueError, match=re.escape(message)):
+        dataclasses.replace(args, **changes)
+    # None where None is the default is "not set", and passes
+    assert dataclasses.replace(args, policy_start_scale=None).policy_start_scale is None
+
+
+def test_each_value_of_a_setting_of_several_is_checked(tmp_path):
+    import dataclasses
+
+    args = REACHER.parse(["--output", str(tmp_path)])
+    assert dataclasses.replace(args, render_size=(64, 48)).render_size == (64, 48)
+    with pytest.raises(ValueError, match=re.escape(
+            "each of render_size must be a whole number >= 1, got (64, 0)")):
+        dataclasses.replace(args, render_size=(64, 0))

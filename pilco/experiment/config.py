@@ -6,7 +6,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Dict, Mapping, Optional
 
-from .settings import non_negative_float, non_negative_int, positive_int, setting, task_settings
+from .settings import (check_declared, non_negative_float, non_negative_int, positive_int,
+                       setting, task_settings)
 
 __all__ = ["LoopSettings", "ExperimentConfig"]
 
@@ -213,49 +214,15 @@ def _whole(value, minimum: int) -> bool:
 
 
 def _check_loop(s: LoopSettings) -> None:
-    if not _whole(s.seed, 0):
-        raise ValueError(f"seed must be a whole number >= 0, got {s.seed!r}")
-    for name in ("horizon", "model_iters", "policy_iters", "model_restarts",
-                 "policy_restarts", "policy_patience", "policy_restart_from"):
-        value = getattr(s, name)
-        if not _whole(value, 1):
-            raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
-    if s.episodes is not None and not _whole(s.episodes, 1):
-        raise ValueError(f"episodes must be a whole number >= 1, got {s.episodes!r}")
-    if s.policy_iters_first is not None and not _whole(s.policy_iters_first, 1):
-        raise ValueError(f"policy_iters_first must be a whole number >= 1 or None, got "
-                         f"{s.policy_iters_first!r}")
-    for name, choices in (("policy_early_stop", ("always", "solved")),
-                          ("policy_restart_when", ("always", "unsolved")),
-                          ("policy_warm_start", ("always", "solved")),
-                          ("policy_start_points_when", ("always", "solved")),
-                          ("policy_start_mixture_when", ("always", "solved", "fragile")),
-                          ("policy_compiler", ("graph", "xla")),
-                          ("policy_optimizer", ("L-BFGS-B", "BFGS"))):
-        value = getattr(s, name)
-        if value not in choices:
-            raise ValueError(f"{name} must be {' or '.join(map(repr, choices))}, got "
-                             f"{value!r}")
-    if not _whole(s.random_episodes, 1):
+    # each setting against its declaration (choices, whole-number and number ranges),
+    # then what a declaration cannot say: the relations between settings
+    if _whole(s.random_episodes, 0) and s.random_episodes < 1:
         raise ValueError("at least one random episode is needed to build the model")
+    check_declared(s)
     if s.episodes is not None and s.episodes < s.random_episodes:
         raise ValueError(f"episodes ({s.episodes}) must be >= random_episodes "
                          f"({s.random_episodes})")
-    if (isinstance(s.policy_fragile_gap, bool)
-            or not isinstance(s.policy_fragile_gap, (int, float))
-            or not s.policy_fragile_gap >= 0):
-        raise ValueError(f"policy_fragile_gap must be a number >= 0, got "
-                         f"{s.policy_fragile_gap!r}")
-    for name in OFF_WHEN_ZERO:
-        value = getattr(s, name)
-        if value is not None and (isinstance(value, bool)
-                                  or not isinstance(value, (int, float)) or value < 0):
-            raise ValueError(f"{name} must be a number >= 0 or None, got {value!r}")
-    for name in ("policy_start_samples", "policy_restart_step"):
-        value = getattr(s, name)
-        if not _whole(value, 0):
-            raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
-    if s.max_data is not None and s.max_data != 0 and not _whole(s.max_data, 2):
+    if s.max_data not in (None, 0) and s.max_data < 2:
         raise ValueError(f"max_data must be at least 2 (or 0 or None: all), got "
                          f"{s.max_data!r}")
 

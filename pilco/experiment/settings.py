@@ -16,8 +16,8 @@ import dataclasses
 import math
 from typing import Any, Callable, Dict, Optional, Sequence
 
-__all__ = ["setting", "task_settings", "field_meta", "positive_float", "non_negative_float",
-           "positive_int", "non_negative_int", "optional_float", "level_name"]
+__all__ = ["setting", "task_settings", "field_meta", "check_declared", "positive_float",
+           "non_negative_float", "positive_int", "non_negative_int", "optional_float", "level_name"]
 
 #: the metadata keys of a :func:`setting` field
 _META = "pilco_flag"
@@ -107,3 +107,46 @@ def task_settings(**defaults: Any) -> Callable[[type], type]:
 def field_meta(field: dataclasses.Field) -> Dict[str, Any]:
     """The command-line metadata of a settings field (empty for a plain field)."""
     return field.metadata.get(_META, {})
+
+
+#: the least value of each whole-number and number kind
+_WHOLE = {positive_int: 1, non_negative_int: 0}
+_NUMBER = {positive_float: (lambda v: v > 0, "a number > 0"),
+           non_negative_float: (lambda v: v >= 0, "a number >= 0")}
+
+
+def check_declared(settings: Any) -> None:
+    """Check every :func:`setting` field of ``settings`` against its own declaration, as
+    its flag checks a command-line value: a value among its ``choices``, a whole number in
+    the range of a ``positive_int``/``non_negative_int`` kind, a finite number in the
+    range of a ``positive_float``/``non_negative_float`` kind; ``None`` passes where it is
+    the default or where the declaration's ``unset`` says what it means. A ``ValueError``
+    names the setting, the rule and the value. Settings made in code, by a preset or read
+    from a saved run meet the same rules as flags."""
+    for field in dataclasses.fields(settings):
+        meta = field_meta(field)
+        if not meta:
+            continue
+        value = getattr(settings, field.name)
+        # None is "not set" where the declaration says what that means or defaults to it
+        none_allowed = meta["unset"] is not None or field.default is None
+        if value is None and none_allowed:
+            continue
+        # a setting of several values (``nargs``): each of them
+        values = tuple(value) if meta["nargs"] is not None else (value,)
+        name = field.name if meta["nargs"] is None else f"each of {field.name}"
+        or_none = " or None" if none_allowed else ""
+        choices, kind = meta["choices"], meta["kind"]
+        for v in values:
+            if choices is not None and v not in choices:
+                raise ValueError(f"{name} must be {' or '.join(map(repr, choices))}, got "
+                                 f"{value!r}")
+            if kind in _WHOLE and not (not isinstance(v, bool) and isinstance(v, int)
+                                       and v >= _WHOLE[kind]):
+                raise ValueError(f"{name} must be a whole number >= {_WHOLE[kind]}"
+                                 f"{or_none}, got {value!r}")
+            if kind in _NUMBER:
+                test, what = _NUMBER[kind]
+                if (isinstance(v, bool) or not isinstance(v, (int, float))
+                        or not math.isfinite(v) or not test(v)):
+                    raise ValueError(f"{name} must be {what}{or_none}, got {value!r}")
