@@ -203,7 +203,6 @@ def test_assignments_and_flags():
         ["--no-stop-stuck-joints"]
     assert flags.setting_flags("stop_stuck_joints", "true", adaptation) == \
         ["--stop-stuck-joints"]
-    flags.check_task_flags(adaptation, ["--no-stop-stuck-joints"])
     # without the task's parser: true/false are flags without value
     assert flags.setting_flags("no_early_stop", "true", None) == ["--no-early-stop"]
     assert flags.setting_flags("horizon", "30", None) == ["--horizon", "30"]
@@ -234,6 +233,23 @@ def test_plan_builds_run_directories(tmp_path):
                                       specs[0].directory, "--quiet", "--no-render",
                                       "--no-figures", "--horizon", "4", "--episodes", "2"]
     assert described[1] == {"label": "horizon=5", "flags": ["--horizon", "5", "--episodes", "2"]}
+
+
+@pytest.mark.parametrize("command, message", [
+    # a value its flag accepts (an integer >= 0) that the settings' check refuses
+    (["cartpole", "--grid", "max_data=0,1"],
+     "setting max_data=1: cartpole rejects its flags: max_data must be at least 2"),
+    # two settings the task refuses together (its own check)
+    (["adaptation", "--set", "changed_output_noise=1e6"],
+     "--stop-stuck-joints (the default) and --changed-output-noise"),
+    (["cartpole", "--set", "horizon=0"], "argument --horizon: must be at least 1"),
+])
+def test_plan_refuses_a_setting_every_run_would_refuse(command, message, tmp_path):
+    """The sweep reads each setting as its runs will, before any run starts."""
+    args = cli.build_parser().parse_args([*command, "--seeds", "0-1", "--output",
+                                          str(tmp_path)])
+    with pytest.raises(ValueError, match=re.escape(message)):
+        cli.plan(args, [])
 
 
 def test_the_sweep_takes_the_tasks_of_pilco_tasks():

@@ -1,12 +1,16 @@
 """pilco.sweep on a local Ray: a tiny cart-pole sweep, its resume, a failing setting.
 
 One Ray instance (2 CPUs) serves the module; the runs are tiny (2 episodes of 5 steps).
+The task is the cart-pole as a module outside the package whose runs fail at run time
+for one setting (settings the task refuses fail the sweep before any run: test_sweep.py).
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import sys
+import textwrap
 
 import pytest
 
@@ -18,20 +22,42 @@ TINY = ["--", "--episodes", "2", "--horizon", "5", "--policy-iters", "1", "--mod
         "2", "--basis-functions", "3"]
 
 
+#: the cart-pole, except that its environment cannot be made for a force above 50 N
+FAILING_TASK = textwrap.dedent('''
+    from pilco.tasks.cartpole import CartPoleTask
+
+
+    class FailingCartPole(CartPoleTask):
+        def make_env(self, s, config):
+            if s.max_force > 50:
+                raise RuntimeError("no motor gives a force above 50 N")
+            return super().make_env(s, config)
+
+
+    TASK = FailingCartPole()
+''')
+TASK = "failing_cartpole:TASK"
+
+
 @pytest.fixture(scope="module")
-def local_ray():
+def local_ray(tmp_path_factory):
+    """A local Ray, and the failing task importable here (its runs get its directory on
+    their PYTHONPATH from the sweep)."""
+    where = tmp_path_factory.mktemp("task")
+    (where / "failing_cartpole.py").write_text(FAILING_TASK)
+    sys.path.insert(0, str(where))
     started, _ = cli._start_ray(argparse.Namespace(address=None, num_cpus=2))
     yield
     if started:
         ray.shutdown()
+    sys.path.remove(str(where))
+    sys.modules.pop("failing_cartpole", None)
 
 
-COMMAND = ["cartpole", "--seeds", "0-1", "--no-progress", "--max-retries", "0",
-           # max_data=1 passes the sweep's flag check (an integer >= 0); the run's
-           # settings check refuses it when the run parses them (at least 2 transitions,
-           # or 0 for all): a usage error, exit status 2
-           "--grid", "max_data=0,1"]
-OK, BAD = "max_data=0", "max_data=1"
+# max_force=60 passes every check of the settings; its runs fail when they make the env
+COMMAND = [TASK, "--seeds", "0-1", "--no-progress", "--max-retries", "0",
+           "--grid", "max_force=10,60"]
+OK, BAD = "max_force=10", "max_force=60"
 
 
 def load(path):
@@ -53,7 +79,7 @@ def test_sweep_runs_every_seed_and_aggregates_their_summaries(sweep):
     summaries = [load(out / OK / f"seed-{s}" / "summary.json") for s in (0, 1)]
     assert [s["seed"] for s in summaries] == [0, 1]
     assert all(len(s["episodes"]) == 2 for s in summaries)
-    assert report["task"] == "cartpole" and report["seeds"] == [0, 1]
+    assert report["task"] == TASK and report["seeds"] == [0, 1]
     assert report["interrupted"] is False
     assert [(r["setting"], r["status"]) for r in report["runs"]] == [
         (OK, "finished"), (OK, "finished"), (BAD, "failed"), (BAD, "failed")]
@@ -62,7 +88,7 @@ def test_sweep_runs_every_seed_and_aggregates_their_summaries(sweep):
     assert report["results"][OK]["finished"] == 2
     record = load(out / OK / "seed-1" / "sweep-run.json")
     assert record["status"] == "finished" and record["returncode"] == 0
-    assert record["flags"] == ["--max-data", "0", *TINY[1:]]
+    assert record["flags"] == ["--max-force", "10", *TINY[1:]]
     assert (out / "success_rate.png").stat().st_size > 0
 
 
@@ -71,11 +97,11 @@ def test_a_failing_run_is_reported_with_its_error_and_the_others_kept(sweep):
     bad = report["results"][BAD]
     assert (bad["finished"], bad["failed"], bad["success_rate"]) == (0, 2, None)
     assert sorted((f["setting"], f["seed"], f["returncode"]) for f in report["failures"]) == [
-        (BAD, 0, 2), (BAD, 1, 2)]
+        (BAD, 0, 1), (BAD, 1, 1)]
     for failure in report["failures"]:
         assert failure["attempts"] == 1
-        assert "exit code 2" in failure["error"]
-        assert "max_data must be at least 2" in failure["stderr_tail"]
+        assert "exit code 1" in failure["error"]
+        assert "no motor gives a force above 50 N" in failure["stderr_tail"]
     assert load(out / BAD / "seed-0" / "sweep-run.json")["status"] == "failed"
     assert report["results"][OK]["finished"] == 2
 
@@ -108,7 +134,7 @@ def test_a_finished_sweep_starts_no_run(sweep, monkeypatch):
         raise AssertionError("a finished sweep must start no run")
 
     monkeypatch.setattr(runs, "execute", no_runs)
-    good_only = [a if a != "max_data=0,1" else "max_data=0" for a in COMMAND]
+    good_only = [a if a != "max_force=10,60" else "max_force=10" for a in COMMAND]
     assert cli.main([*good_only, "--output", str(out), "--no-figures", *TINY]) == 0
     assert [r["status"] for r in load(out / "sweep.json")["runs"]] == ["skipped", "skipped"]
 

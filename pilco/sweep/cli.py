@@ -28,7 +28,7 @@ import pilco.tasks
 from pilco.runtime import configure_logging, log_level
 
 from . import aggregate, runs
-from .flags import RESERVED, check_task_flags, parse_assignment, parse_seeds, settings
+from .flags import RESERVED, parse_assignment, parse_seeds, settings
 from .preflight import SweepError, check_ray_address, lock_output, split_address
 from .report import write_report
 from .runs import RunSpec
@@ -94,7 +94,8 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
 
 def plan(args: argparse.Namespace, extra: Sequence[str]) -> Tuple[List[RunSpec], List[Dict]]:
     """The runs and settings of parsed ``args`` (ValueError naming a bad argument)."""
-    parser = pilco.tasks.build_parser(args.task)  # ValueError naming the tasks if unknown
+    task = pilco.tasks.get_task(args.task)  # ValueError naming the tasks if unknown
+    parser = task.parser()
     seeds = parse_seeds(args.seeds)
     if args.cpus_per_run < 1:
         raise ValueError(f"--cpus-per-run must be at least 1, got {args.cpus_per_run}")
@@ -114,8 +115,9 @@ def plan(args: argparse.Namespace, extra: Sequence[str]) -> Tuple[List[RunSpec],
     grid = [parse_assignment(text, grid=True) for text in args.grid]
     combos = settings(fixed, grid, parser)
     for label, flags in combos:
-        try:
-            check_task_flags(parser, [*flags, *extra])
+        try:  # as a run reads them: flags, then the settings' own checks (one seed's)
+            task.read_settings(["--seed", str(seeds[0]), "--output", "x", "--quiet",
+                                "--no-render", "--no-figures", *flags, *extra])
         except ValueError as err:
             raise ValueError(f"setting {label}: {args.task} rejects its flags: {err}") \
                 from None

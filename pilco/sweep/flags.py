@@ -1,7 +1,8 @@
-"""The task flags of a sweep's runs: the seed list, ``--set``/``--grid`` assignments,
-the settings (one per combination of ``--grid`` values) and their flags, checked with
-the task's argument parser before anything runs (a typo fails in a second, not in every
-run)."""
+"""The task flags of a sweep's runs: the seed list, ``--set``/``--grid`` assignments and
+the settings (one per combination of ``--grid`` values) with their flags, each key
+checked against the task's argument parser (the sweep then reads each setting as a run
+will, :meth:`pilco.tasks.base.Task.read_settings`, before anything runs: a typo or a
+refused value fails in a second, not in every run)."""
 from __future__ import annotations
 
 import argparse
@@ -9,8 +10,7 @@ import itertools
 import re
 from typing import Any, List, Optional, Sequence, Tuple
 
-__all__ = ["RESERVED", "parse_seeds", "parse_assignment", "setting_flags", "settings",
-           "check_task_flags"]
+__all__ = ["RESERVED", "parse_seeds", "parse_assignment", "setting_flags", "settings"]
 
 #: flags the sweep passes to every run itself (``--set``/``--grid`` keys may not name them)
 RESERVED = ("seed", "output", "resume", "quiet", "no_render", "no_figures", "help")
@@ -119,23 +119,3 @@ def settings(fixed: Sequence[Tuple[str, str]], grid: Sequence[Tuple[str, List[st
     if len(set(labels)) != len(labels):
         raise ValueError("two settings get the same directory name; use plainer values")
     return out
-
-
-class _TaskFlagError(Exception):
-    pass
-
-
-def check_task_flags(parser: argparse.ArgumentParser, flags: Sequence[str]) -> None:
-    """Parse ``flags`` (as a run gets them) with the task's ``parser``; ValueError with
-    the parser's message when it rejects them."""
-    def fail(message: str = "", *_, **__):
-        raise _TaskFlagError(message)
-
-    parser.error = fail  # the parser is ours: no usage print, no exit
-    parser.exit = fail
-    try:
-        parser.parse_args(["--seed", "0", "--output", "x", "--quiet", "--no-render",
-                           "--no-figures", *flags])
-    except _TaskFlagError as err:
-        raise ValueError(str(err)) from None
-

@@ -93,11 +93,8 @@ class Task:
         logging at ``--log-level`` and the TensorFlow threads."""
         from ..runtime import configure_logging, configure_threads, use_xla_cache
 
-        settings = parse_settings(self.settings, argv, description=self.description,
-                                  presets=self.presets, prog=self.prog,
-                                  examples=self.examples)
         try:
-            settings = self.check(settings)
+            settings = self.read_settings(argv)
         except ValueError as err:
             self.parser().error(str(err))
         configure_logging(settings.log_level)
@@ -105,6 +102,16 @@ class Task:
         if settings.policy_compiler == "xla":
             use_xla_cache()
         return settings
+
+    def read_settings(self, argv: Optional[Sequence[str]] = None) -> RunSettings:
+        """The settings of command line ``argv`` as :meth:`parse` reads them, checked by
+        :meth:`check`, without :meth:`parse`'s set-up (logging, threads) and without
+        printing or exiting: ``ValueError`` with the usage error's message. A sweep
+        checks each of its settings so before it starts a run."""
+        settings = parse_settings(self.settings, argv, description=self.description,
+                                  presets=self.presets, prog=self.prog,
+                                  examples=self.examples, exit_on_error=False)
+        return self.check(settings)
 
     def check(self, settings: RunSettings) -> RunSettings:
         """Settings derived from others and checks across settings: returns the settings

@@ -160,11 +160,13 @@ def saved_settings(directory: str) -> Dict[str, Any]:
 def parse_settings(cls: Type[S], argv: Optional[Sequence[str]] = None, *,
                    description: str = "",
                    presets: Optional[Mapping[str, Mapping[str, Any]]] = None,
-                   prog: Optional[str] = None, examples: Sequence[str] = ()) -> S:
+                   prog: Optional[str] = None, examples: Sequence[str] = (),
+                   exit_on_error: bool = True) -> S:
     """The settings of a command line (precedence in the module's docstring); ``output``
     is ``--resume``'s directory on resume, else ``--output`` with ``{seed}`` replaced.
     Bad values, and values the settings' checks refuse together, exit with argparse's
-    usage error (status 2) naming the setting."""
+    usage error (status 2) naming the setting; with ``exit_on_error=False`` they raise
+    ``ValueError`` with the same message instead (nothing printed)."""
     presets = {k: dict(v) for k, v in (presets or {}).items()}
     names = {f.name for f in dataclasses.fields(cls)}
     for name, values in presets.items():
@@ -172,6 +174,14 @@ def parse_settings(cls: Type[S], argv: Optional[Sequence[str]] = None, *,
         if unknown:
             raise ValueError(f"preset {name!r} sets unknown settings {unknown}")
     parser = build_parser(cls, description, presets, prog, examples)
+    if not exit_on_error:
+        def refuse(message: str):
+            raise ValueError(message)
+
+        def leave(status: int = 0, message: Optional[str] = None):  # --help, --version
+            raise ValueError(message or f"the command line ends the program ({status})")
+
+        parser.error, parser.exit = refuse, leave  # this parser is ours alone
     given = vars(parser.parse_args(argv))
     saved: Dict[str, Any] = {}
     if given.get("resume"):
