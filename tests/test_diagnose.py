@@ -258,6 +258,13 @@ def test_verdict_rules_in_order_on_synthetic_numbers():
     assert rule(start_widths=4.0, gain=0.5, better_solves_real=True) == (
         "objective: cost flat", 2)
     assert rule(start_widths=2.99) != ("objective: cost flat", 2)
+    # only while the search stays on the plateau (at least 90 % of the largest cost): a
+    # policy predicted well below it left the flat start behind, and the later rules judge
+    assert rule(start_widths=4.0, max_cost=40.0, run_cost=36.0) == ("objective: cost flat", 2)
+    assert rule(start_widths=4.0, max_cost=40.0, run_cost=35.9) == (
+        "objective: optimum short of the target", 7)
+    assert rule(start_widths=4.0, max_cost=40.0, run_cost=14.2, pred_solved=True,
+                open_loop_wrong=True) == ("model", 3)
     # predicted to solve but failed: one-step coverage (overall 0.90, worst dimension 0.70)
     # decides, before any better optimum
     assert rule(pred_solved=True, coverage=0.89, gain=50.0) == ("model", 3)

@@ -284,7 +284,9 @@ def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restart
     better = [c for c in others if run_cost - c["pred_cost"] >= needed]
     solves = (any(c["real_solved"] for c in better)
               if better and all("real_solved" in c for c in better) else None)
+    max_reward = geometry.max_reward if geometry is not None else 1.0
     return {"iterations": iters, "method": cfg.policy_optimizer, "horizon": agent.horizon,
+            "max_cost": agent.horizon * max_reward,
             "candidates": candidates, "run_pred_cost": run_cost,
             "best": others.index(best) + 1 if best else None,
             "best_pred_cost": best["pred_cost"] if best else None, "gain": gain,

@@ -86,7 +86,8 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
              "open_loop_wrong": model["open_loop"]["wrong"],
              "final_inside": multi.get("final_inside"), "optimism": multi.get("optimism"),
              "episode_pred_cost": multi.get("pred_cost_sum"),
-             "run_cost": optimiser["run_pred_cost"], "gain": optimiser["gain"],
+             "run_cost": optimiser["run_pred_cost"], "max_cost": optimiser["max_cost"],
+             "gain": optimiser["gain"],
              "better_solves_real": optimiser["better_solves_real"]}
     result = {
         "directory": exp.directory, "task": exp.config.task, "seed": int(exp.config.seed),

@@ -16,10 +16,13 @@ at least ``max(1, 0.1 * the run's predicted cost)`` (one step at full cost, or a
 2. ``objective: cost flat``: d0 > 3 σ_c, i.e. the cost's slope at the start is below
    3 e^-4 = 5.5 % of its maximum: the optimiser gets almost no gradient. (The slope is
    that of the cost at the start distribution's mean; a wide predicted spread, as in the
-   cart-pole's swing-up from 4 σ_c, still gives the expected cost some slope.) Not when
-   rule 4's evidence holds: a clearly better candidate of the same objective solves the
-   task on the real system, so the flat start did not stop the search from succeeding
-   (the cart-pole's failures are of this kind).
+   cart-pole's swing-up from 4 σ_c, still gives the expected cost some slope.) Only when
+   the search stayed on the plateau: the run's predicted cost is at least ``plateau``
+   (0.9) of the horizon's largest cost; a policy predicted well below it has left the
+   flat start behind (the cart-pole starts 4 σ_c away in every episode, and its learned
+   episodes are predicted far below the plateau). Not when rule 4's evidence holds: a
+   clearly better candidate of the same objective solves the task on the real system, so
+   the flat start did not stop the search from succeeding.
 3. The run's policy was predicted to solve the task (the mean predicted distance meets the
    task's solved rule: within the success threshold at some step, or for the last
    ``hold_steps`` steps) but the real episode did not: ``model`` if model wrong (it is
@@ -75,6 +78,8 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
       cost, and the predicted cost (over the episode's steps; None: unknown);
     - ``run_cost``, ``gain``: the run's predicted cost and the best candidate's decrease
       of it (None: no candidates);
+    - ``max_cost``: the largest predicted cost over the horizon (None: unknown; rule 2
+      then does not ask whether the search stayed on the plateau);
     - ``better_solves_real``: whether a clearly better candidate solved the task on the
       real system (None: not run).
 
@@ -101,10 +106,17 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
         return {"label": "solved", "rule": 1, "reason": "the episode solved the task"}
     widths = facts.get("start_widths")
     confirmed = better and bool(facts.get("better_solves_real"))
-    if widths is not None and widths > t.flat_widths and not confirmed:
+    max_cost = facts.get("max_cost")
+    on_plateau = (max_cost is None or run_cost is None
+                  or run_cost >= t.plateau * float(max_cost))
+    if widths is not None and widths > t.flat_widths and on_plateau and not confirmed:
+        stayed = (f"; the run's policy is predicted at cost {run_cost:.2f} of at most "
+                  f"{float(max_cost):.2f}" if max_cost is not None and run_cost is not None
+                  else "")
         return {"label": "objective: cost flat", "rule": 2,
                 "reason": f"start distance {widths:.2f} cost widths > {t.flat_widths:g}: the "
-                          f"cost's slope there is {slope_ratio(widths):.1%} of its maximum"}
+                          f"cost's slope there is {slope_ratio(widths):.1%} of its maximum"
+                          + stayed}
     if facts.get("pred_solved"):
         return {"label": model_or_objective, "rule": 3,
                 "reason": "the run's policy was predicted to solve the task but did not; "

@@ -25,8 +25,11 @@ class Thresholds:
     #: ``max(gain_abs, gain_rel * run's predicted cost)``
     gain_abs: float = 1.0
     gain_rel: float = 0.10
-    #: the cost is flat at start distances beyond this many cost widths
+    #: the cost is flat at start distances beyond this many cost widths ...
     flat_widths: float = 3.0
+    #: ... and the search stayed on its plateau if the run's predicted cost is at least
+    #: this fraction of the horizon's largest cost
+    plateau: float = 0.9
 
     def gain_needed(self, run_cost: float) -> float:
         """The predicted-cost decrease that counts as clearly better than ``run_cost``
