@@ -13,8 +13,16 @@ Sub-modules:
   layout is :mod:`pilco.models.storage`.
 - :mod:`pilco.envs`: gymnasium environments of the paper (cart-pole, Fetch joint reacher).
 - :mod:`pilco.deploy`: NumPy-only policy evaluation for robots (no TensorFlow import).
+- :mod:`pilco.portable`: the same arithmetic on every x86-64 CPU with AVX2 (set up when
+  :mod:`pilco` is imported before numpy).
 """
 import logging
+
+from .portable import use_portable_arithmetic
+
+# before anything loads numpy: its loops and OpenBLAS's kernels as every x86-64 CPU with
+# AVX2 runs them, so that a seed gives the same run on every such CPU (pilco.portable)
+use_portable_arithmetic()
 
 __version__ = "0.1.0"
 

@@ -132,8 +132,8 @@ def finished_summary(run_dir) -> Optional[Dict[str, Any]]:
 
 def trim_provenance(provenance: Any) -> Optional[Dict[str, Any]]:
     """What :func:`pilco.sweep.aggregate.provenance_counts` reads of a summary's
-    ``provenance`` (commit and dirty flag, CPU model, ``TF_ENABLE_ONEDNN_OPTS``), in the
-    same layout; None without provenance."""
+    ``provenance`` (commit and dirty flag, CPU model, whether the arithmetic was portable,
+    ``TF_ENABLE_ONEDNN_OPTS``), in the same layout; None without provenance."""
     if not isinstance(provenance, Mapping) or not provenance:
         return None
     git = provenance.get("git")
@@ -142,6 +142,9 @@ def trim_provenance(provenance: Any) -> Optional[Dict[str, Any]]:
                 if isinstance(git, Mapping) else None),
         "cpu": str(provenance.get("cpu", "unknown")),
     }
+    arithmetic = provenance.get("arithmetic")
+    if isinstance(arithmetic, Mapping) and arithmetic.get("portable") is not None:
+        out["arithmetic"] = {"portable": bool(arithmetic["portable"])}
     env = provenance.get("environment")
     if isinstance(env, Mapping) and "TF_ENABLE_ONEDNN_OPTS" in env:
         out["environment"] = {"TF_ENABLE_ONEDNN_OPTS": str(env["TF_ENABLE_ONEDNN_OPTS"])}

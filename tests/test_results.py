@@ -59,7 +59,7 @@ def test_committed_exports_are_small_and_named_by_task():
 
 # --------------------------------------------------------------- a synthetic sweep
 def _summary(seed, *, success, solved_at, total, cpu="AMD EPYC", dirty=False, onednn=None,
-             complete=True):
+             complete=True, arithmetic=None):
     environment = {"TF_NUM_INTRAOP_THREADS": "1"}
     if onednn is not None:
         environment["TF_ENABLE_ONEDNN_OPTS"] = onednn
@@ -75,7 +75,8 @@ def _summary(seed, *, success, solved_at, total, cpu="AMD EPYC", dirty=False, on
         ],
         "distances": [[0.5, 0.45, 0.412345678, 0.42], [0.5, 0.2, 0.04]],
         "provenance": {"git": {"commit": "abcdef1234567890", "dirty": dirty}, "cpu": cpu,
-                       "python": "3.11.7", "environment": environment},
+                       "python": "3.11.7", "environment": environment,
+                       **({"arithmetic": arithmetic} if arithmetic else {})},
     }
 
 
@@ -94,7 +95,8 @@ def sweep(tmp_path):
     _write(run / "seed-0" / "sweep-run.json", {"status": "finished"})
     _write(run / "seed-1" / "summary.json",
            _summary(1, success=False, solved_at=None, total=300.0,
-                    cpu="Intel(R) Xeon(R) Processor", dirty=True, onednn="0"))
+                    cpu="Intel(R) Xeon(R) Processor", dirty=True, onednn="0",
+                    arithmetic={"portable": True, "numpy_avx512": [], "blas": ["Haswell"]}))
     _write(run / "seed-2" / "summary.json", _summary(2, success=True, solved_at=2, total=1.0,
                                                      complete=False))
     _write(run / "seed-2" / "sweep-run.json", {"status": "running"})
@@ -132,6 +134,7 @@ def test_export_keeps_the_finished_runs_and_counts_the_others(sweep):
     assert first["provenance"] == {"git": {"commit": "abcdef1234567890", "dirty": False},
                                    "cpu": "AMD EPYC"}
     assert data["runs"][1]["provenance"]["environment"] == {"TF_ENABLE_ONEDNN_OPTS": "0"}
+    assert data["runs"][1]["provenance"]["arithmetic"] == {"portable": True}
     aggregate = data["settings"]["default"]
     assert (aggregate["runs"], aggregate["finished"], aggregate["failed"],
             aggregate["not_run"], aggregate["successes"]) == (5, 2, 1, 2, 1)
@@ -139,7 +142,7 @@ def test_export_keeps_the_finished_runs_and_counts_the_others(sweep):
     assert aggregate["provenance"] == {
         "commit": {"abcdef123456": 1, "abcdef123456-dirty": 1},
         "cpu": {"AMD EPYC": 1, "Intel(R) Xeon(R) Processor": 1},
-        "onednn": {"default": 1, "0": 1}}
+        "onednn": {"default": 1, "0": 1}, "arithmetic": {"unknown": 1, "portable": 1}}
 
 
 def test_export_round_trips_and_a_hand_edit_is_caught(sweep, tmp_path):

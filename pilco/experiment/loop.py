@@ -17,12 +17,14 @@ safe point after saving. Episodes are numbered from 1 (episode 1 is the first ra
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import time
 from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 import numpy as np
 
+from ..portable import portability_warning
 from .config import ExperimentConfig
 from .episode import Episode, distance_from_info, make_env, rollout
 from .learning import learn_policy, predictions_after, predictions_before, train_model
@@ -34,6 +36,15 @@ from .store import restore_progress
 __all__ = ["Experiment"]
 
 logger = logging.getLogger(__name__)
+
+
+@functools.lru_cache(maxsize=1)
+def _warn_unless_portable() -> None:
+    """Once per process: warn when its arithmetic is its CPU's own although the CPU could
+    run the paths every x86-64 CPU with AVX2 runs alike (:mod:`pilco.portable`)."""
+    message = portability_warning()
+    if message:
+        logger.warning(message)
 
 Data = Tuple[np.ndarray, np.ndarray]
 
@@ -221,6 +232,7 @@ class Experiment(RunRecord):
         ``self.interrupted`` is True and the block is left without the exception.
         """
         self._t_start = time.perf_counter()
+        _warn_unless_portable()
         try:
             with sigterm_as_keyboard_interrupt():
                 try:

@@ -1,9 +1,9 @@
 """Where a run's numbers came from: code version, library versions, CPU and the settings
 of TensorFlow's arithmetic.
 
-A seed's outcome depends on more than the seed: the same seed gives another result on a
-CPU whose oneDNN kernels round differently, with ``TF_ENABLE_ONEDNN_OPTS=0``, with
-another thread count, and after small code changes. :func:`provenance` collects those
+A seed's outcome depends on more than the seed: the same seed gives another result where
+numpy or BLAS take their CPU's own paths (:mod:`pilco.portable`), with another thread
+count, and after small code changes. :func:`provenance` collects those
 facts once per process for ``summary.json`` (key ``provenance``), so two runs of a sweep
 can be compared knowing whether they ran the same code the same way.
 """
@@ -16,6 +16,8 @@ import subprocess
 from importlib import metadata
 from typing import Any, Dict, Optional
 
+from ..portable import arithmetic_state
+
 __all__ = ["provenance", "git_commit", "cpu_model"]
 
 #: packages whose versions change the arithmetic or the environments
@@ -24,7 +26,8 @@ PACKAGES = ("pilco", "tensorflow", "tensorflow-probability", "gpflow", "numpy", 
 
 #: environment variables that change TensorFlow's arithmetic or its thread pools
 ENVIRONMENT = ("TF_ENABLE_ONEDNN_OPTS", "TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS",
-               "OMP_NUM_THREADS", "PILCO_ARITHMETIC_OPTIMIZER")
+               "OMP_NUM_THREADS", "PILCO_ARITHMETIC_OPTIMIZER", "PILCO_PORTABLE_ARITHMETIC",
+               "NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE")
 
 
 def git_commit(directory: Optional[str] = None) -> Optional[Dict[str, Any]]:
@@ -75,6 +78,7 @@ def _static() -> Dict[str, Any]:
         "python": platform.python_version(),
         "cpu": cpu_model(),
         "cpu_count": os.cpu_count(),
+        "arithmetic": arithmetic_state(),
         "host": platform.node(),
     }
 
@@ -82,7 +86,9 @@ def _static() -> Dict[str, Any]:
 def provenance() -> Dict[str, Any]:
     """Code version (``git``: commit and whether tracked files were changed; None
     outside a checkout), package ``versions``, ``python``, ``cpu`` model and
-    ``cpu_count``, ``host``, and the ``environment`` variables of :data:`ENVIRONMENT`
-    that are set (the git call and versions are read once per process)."""
+    ``cpu_count``, the paths of numpy's and BLAS's ``arithmetic``
+    (:func:`pilco.portable.arithmetic_state`), ``host``, and the ``environment``
+    variables of :data:`ENVIRONMENT` that are set (all but the environment are read once
+    per process)."""
     env = {k: os.environ[k] for k in ENVIRONMENT if k in os.environ}
     return {**_static(), "environment": env}

@@ -188,9 +188,13 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
 
 def provenance_counts(summaries: Sequence[Mapping[str, Any]]) -> Dict[str, Dict[str, int]]:
     """How many runs ran which code and arithmetic: ``{"commit": {sha[:12] (+ "-dirty"):
-    runs}, "cpu": {model: runs}, "onednn": {TF_ENABLE_ONEDNN_OPTS or "default": runs}}``
-    from the summaries' ``provenance`` ("unknown" for summaries without it)."""
-    counts: Dict[str, Dict[str, int]] = {"commit": {}, "cpu": {}, "onednn": {}}
+    runs}, "cpu": {model: runs}, "onednn": {TF_ENABLE_ONEDNN_OPTS or "default": runs},
+    "arithmetic": {"portable" or "cpu's own": runs}}`` from the summaries' ``provenance``
+    ("unknown" for summaries without it). ``arithmetic`` (:mod:`pilco.portable`) only
+    when some run recorded it (runs before it was recorded count as "unknown"), so that
+    the counts of older sweeps stay as they were."""
+    counts: Dict[str, Dict[str, int]] = {"commit": {}, "cpu": {}, "onednn": {},
+                                         "arithmetic": {}}
     for s in summaries:
         p = s.get("provenance")
         p = p if isinstance(p, Mapping) else {}
@@ -200,10 +204,18 @@ def provenance_counts(summaries: Sequence[Mapping[str, Any]]) -> Dict[str, Dict[
         env = p.get("environment") if isinstance(p.get("environment"), Mapping) else {}
         keys = {"commit": commit, "cpu": str(p.get("cpu", "unknown")),
                 "onednn": "unknown" if not p else str(env.get("TF_ENABLE_ONEDNN_OPTS",
-                                                               "default"))}
+                                                               "default")),
+                "arithmetic": _arithmetic(p.get("arithmetic"))}
         for field, key in keys.items():
             counts[field][key] = counts[field].get(key, 0) + 1
+    if set(counts["arithmetic"]) <= {"unknown"}:
+        del counts["arithmetic"]
     return counts
+
+
+def _arithmetic(state: Any) -> str:
+    portable = state.get("portable") if isinstance(state, Mapping) else None
+    return "unknown" if portable is None else "portable" if portable else "cpu's own"
 
 
 def _num(value: Optional[float], fmt: str = ".3g") -> str:

@@ -52,8 +52,8 @@ def write_report(args: argparse.Namespace, specs: Sequence[RunSpec],
             failed=sum(r["status"] == "failed" for r in rows),
             not_run=sum(r["status"] in ("not_run", "missing") for r in rows))
         for field, what in (("commit", "code versions"), ("onednn", "oneDNN settings"),
-                            ("cpu", "CPU models")):
-            seen = results[label]["provenance"][field]
+                            ("cpu", "CPU models"), ("arithmetic", "arithmetics")):
+            seen = results[label]["provenance"].get(field, {})
             if len(seen) > 1:
                 logger.warning("%s: the runs mix %d %s (%s); their rate is not one "
                                "setting's", label, len(seen), what,
