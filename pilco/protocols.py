@@ -32,6 +32,10 @@ class Reward(Protocol):
         Shapes: m [1, D], s [D, D] -> mean [1, 1], variance [1, 1].
         """
 
+    # Optional, not part of the check: ``cost_geometry() ->
+    # pilco.reward_geometry.CostGeometry`` (where the target is, in task units), which the
+    # diagnosis reads for its distance and cost checks.
+
 
 @runtime_checkable
 class Controller(Protocol):

@@ -2,13 +2,14 @@
 
 Every reward has ``moments(m [1, D], s [D, D]) -> (mean [1, 1], variance [1, 1])`` (the
 protocol :class:`pilco.protocols.Reward`) and ``compute_reward``, the same with its inputs
-checked.
+checked; the saturating ones and their weighted sums also say where their target is
+(``cost_geometry()``, :mod:`pilco.reward_geometry`).
 PILCO maximises the sum of expected rewards over the horizon. A saturating
 ("exponential") reward ``exp(-(x - t)^T W (x - t) / 2)`` is PILCO's cost ``1 - reward``.
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Optional, Sequence
 
 import gpflow
 import numpy as np
@@ -19,6 +20,7 @@ from gpflow.config import default_float
 from .angles import trig_moments
 from .moments import compiled, eye_like
 from .protocols import Reward
+from .reward_geometry import CostGeometry, quadratic_geometry, tip_geometry, weighted_geometry
 from .validation import (
     check_entries,
     check_gaussian,
@@ -111,6 +113,11 @@ class ExponentialReward(_Reward):
     def moments(self, m, s):
         return _exp_reward_moments(m, s, tf.convert_to_tensor(self.W), tf.convert_to_tensor(self.t))
 
+    def cost_geometry(self) -> CostGeometry:
+        """Where the reward's target is, read from its current ``W`` and ``t``
+        (:func:`pilco.reward_geometry.quadratic_geometry`)."""
+        return quadratic_geometry(self.W.numpy(), self.t.numpy()[0])
+
 
 class AxisBumpsReward(_Reward):
     """Weighted sum of one-dimensional saturating bumps, ``sum_k c_k exp(-(x[d_k] - t_k)^2
@@ -201,6 +208,13 @@ class CombinedRewards(_Reward):
             var += c[i] ** 2 * vi
         return mean, var
 
+    def cost_geometry(self) -> Optional[CostGeometry]:
+        """The widest positively weighted part's geometry
+        (:func:`pilco.reward_geometry.weighted_geometry`); None when such a part has none."""
+        parts = [r.cost_geometry() if callable(getattr(r, "cost_geometry", None)) else None
+                 for r in self.base_rewards]
+        return weighted_geometry(self.coefs.numpy(), parts)
+
 
 class CartPoleReward(_Reward):
     """Saturating reward on the cart-pole's pendulum tip (the MATLAB release's ``loss_cp``).
@@ -234,6 +248,10 @@ class CartPoleReward(_Reward):
         M6 = tf.concat([m, Mt], axis=1)
         S6 = tf.concat([tf.concat([s, cross], 1), tf.concat([tf.transpose(cross), St], 1)], 0)
         return _exp_reward_moments(M6, S6, self._W, self._t)
+
+    def cost_geometry(self) -> CostGeometry:
+        """The tip's distance to upright (:func:`pilco.reward_geometry.tip_geometry`)."""
+        return tip_geometry(self.pendulum_length, self.width)
 
 
 def difference_map(state_dim: int, first: Sequence[int], second: Sequence[int]) -> np.ndarray:
