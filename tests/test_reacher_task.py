@@ -219,12 +219,12 @@ def test_the_adaptation_has_the_reachers_costs(tmp_path):
     np.testing.assert_allclose(agent.reward.base_rewards[0].base_rewards[1].W.numpy(),
                                reacher_agent.position_weights(10, 0.05))  # the fine cost
     assert ADAPTATION.parse(["--limit-cost", "0"]).limit_cost == 0.0
-    # a run saved while the adaptation had no fine cost (null) resumes without it
+    # a run saved while the adaptation had no fine cost (null) resumes without it (0: none)
     run = tmp_path / "old"
     run.mkdir()
     (run / "progress.json").write_text(json.dumps({"settings": dict(settings_to_dict(args),
                                                                     fine_cost_width=None)}))
-    assert ADAPTATION.parse(["--resume", str(run)]).fine_cost_width is None
+    assert ADAPTATION.parse(["--resume", str(run)]).fine_cost_width == 0.0
 
 
 class _HealthyRun:

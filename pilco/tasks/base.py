@@ -93,8 +93,8 @@ class Task:
         logging at ``--log-level`` and the TensorFlow threads."""
         from ..runtime import configure_logging, configure_threads, use_xla_cache
 
-        try:
-            settings = self.read_settings(argv)
+        try:  # --help and argparse's own usage errors exit inside; the checks raise
+            settings = self.read_settings(argv, exit_on_error=True)
         except ValueError as err:
             self.parser().error(str(err))
         configure_logging(settings.log_level)
@@ -103,14 +103,16 @@ class Task:
             use_xla_cache()
         return settings
 
-    def read_settings(self, argv: Optional[Sequence[str]] = None) -> RunSettings:
+    def read_settings(self, argv: Optional[Sequence[str]] = None, *,
+                      exit_on_error: bool = False) -> RunSettings:
         """The settings of command line ``argv`` as :meth:`parse` reads them, checked by
         :meth:`check`, without :meth:`parse`'s set-up (logging, threads) and without
-        printing or exiting: ``ValueError`` with the usage error's message. A sweep
-        checks each of its settings so before it starts a run."""
+        printing or exiting: ``ValueError`` with the usage error's message
+        (``exit_on_error=True``: argparse's own errors and ``--help`` print and exit as on
+        the command line). A sweep checks each of its settings so before it starts a run."""
         settings = parse_settings(self.settings, argv, description=self.description,
                                   presets=self.presets, prog=self.prog,
-                                  examples=self.examples, exit_on_error=False)
+                                  examples=self.examples, exit_on_error=exit_on_error)
         return self.check(settings)
 
     def check(self, settings: RunSettings) -> RunSettings:

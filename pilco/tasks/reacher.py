@@ -179,6 +179,12 @@ class ReacherSettings(RunSettings):
                                  kind=positive_int, nargs=2, metavar=("W", "H"))
 
 
+#: values that runs saved by earlier versions may hold, read as today's (the straightened
+#: arm's earlier name; the adaptation's "no fine cost" saved as null)
+ReacherSettings.EARLIER_VALUES = {"damage_mode": {"zero": "straight"},
+                                  "fine_cost_width": {None: 0.0}}
+
+
 @task_settings(output="runs/damaged-reacher-seed{seed}")
 class DamagedReacherSettings(ReacherSettings):
     """The damaged arm's settings: the healthy arm's defaults (with the paper's damage,

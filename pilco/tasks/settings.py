@@ -157,6 +157,15 @@ def saved_settings(directory: str) -> Dict[str, Any]:
     return dict(progress.get("settings") or progress.get("args") or {})
 
 
+def _today(renamed: Mapping[Any, Any], value: Any) -> Any:
+    """A saved setting's value under today's name for it (``renamed``: earlier value ->
+    today's, from the settings class's ``EARLIER_VALUES``)."""
+    try:
+        return renamed.get(value, value)
+    except TypeError:  # a list or another unhashable value: never renamed
+        return value
+
+
 def parse_settings(cls: Type[S], argv: Optional[Sequence[str]] = None, *,
                    description: str = "",
                    presets: Optional[Mapping[str, Mapping[str, Any]]] = None,
@@ -198,7 +207,8 @@ def parse_settings(cls: Type[S], argv: Optional[Sequence[str]] = None, *,
         if preset not in presets:
             parser.error(f"--preset {preset}: this task has no such preset")
         values.update(presets[preset])
-    values.update({k: v for k, v in saved.items() if k in names})
+    earlier = getattr(cls, "EARLIER_VALUES", {})
+    values.update({k: _today(earlier.get(k, {}), v) for k, v in saved.items() if k in names})
     values.update(given)
     try:
         settings = settings_from_dict(cls, values)
