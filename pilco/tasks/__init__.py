@@ -27,7 +27,7 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-from typing import Callable, Dict, Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 __all__ = ["TASKS", "get_task", "is_task_reference", "task_import_root", "build_parser",
            "task_main", "run_task", "open_run"]
@@ -64,10 +64,6 @@ def get_task(name: str):
     return _import_task(name)
 
 
-#: ``id(task) -> "module:ATTRIBUTE"`` of the tasks :func:`get_task` imported
-_REFERENCES: Dict[int, str] = {}
-
-
 def _import_task(reference: str):
     from .base import Task
 
@@ -89,7 +85,7 @@ def _import_task(reference: str):
     if not isinstance(task, Task):
         raise TypeError(f"task {reference!r} is a {type(task).__name__}, not an instance of "
                         f"pilco.tasks.base.Task")
-    _REFERENCES[id(task)] = reference
+    task.imported_as = reference
     return task
 
 

@@ -53,6 +53,9 @@ class Task:
     presets: ClassVar[Mapping[str, Mapping[str, Any]]] = {}
     #: the paper's timings of the task, shown beside the run's (``{phase: seconds}``)
     paper_seconds: ClassVar[Optional[Dict[str, float]]] = None
+    #: ``module:ATTRIBUTE`` when :func:`pilco.tasks.get_task` imported this instance so
+    #: (set on the instance; None for a task found by name or made in code)
+    imported_as: Optional[str] = None
 
     # -- settings -------------------------------------------------------------------------
     def parser(self):
@@ -67,9 +70,7 @@ class Task:
         registered by name, :data:`pilco.tasks.TASKS`). Runs record it as their ``task``,
         so that a sweep starts and the diagnosis reopens a task defined outside the
         package."""
-        from . import _REFERENCES
-
-        return _REFERENCES.get(id(self), self.name)
+        return self.imported_as or self.name
 
     @property
     def prog(self) -> str:
