@@ -169,9 +169,9 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
         changed_output_threshold=10.0, stop_stuck_joints=stop, stuck_joint_ratio=0.1,
         replan_stuck_joints=False)  # a re-planned episode is not replayed (its docstring)
     exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
-                     model_data=adaptation_model.damaged_arm_data)
+                     model_data=adaptation_model.damaged_arm_data,
+                     before_replayed_episode=adaptation.replay_damage(run_args))
     exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None}
-    exp.before_replayed_episode = adaptation.replay_damage(exp, run_args)
     PlaneEnv.broken = False
     try:
         summary = adaptation.run(exp, run_args)

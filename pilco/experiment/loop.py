@@ -75,15 +75,14 @@ class Experiment(RunRecord):
             episode's, factors 1), also for the agent of a resumed run.
         reset_options: ``episode number -> options of env.reset`` (e.g. the target of a
             multi-task run's episode); default none.
+        before_replayed_episode: ``(run, view, episode number) -> None``: when the run's
+            learning is replayed (:func:`pilco.diagnose.replay.replay_learning`, e.g. by
+            ``python -m pilco.diagnose``), called before each learned episode's model fit
+            with this run and the replay's view, so that a task can redo what it changed in
+            its agent during the run (the adaptation's damage); default none.
 
     The collected episodes, records, timings, task state, saving and the summary are
     those of :class:`~pilco.experiment.record.RunRecord`.
-
-    ``before_replayed_episode``: ``(view, episode number) -> None`` or None; when the
-    run's learning is replayed (:func:`pilco.diagnose.replay.replay_learning`, e.g. by
-    ``python -m pilco.diagnose``), called before each learned episode's model fit
-    with the replay's view, so that a task can redo what it changed in its agent during
-    the run (the adaptation's damage).
     """
 
     def __init__(self, config: ExperimentConfig, directory: str,
@@ -97,7 +96,8 @@ class Experiment(RunRecord):
                  success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None,
                  model_data: Optional[Callable[[Any], Tuple[np.ndarray, np.ndarray,
                                                             Optional[np.ndarray]]]] = None,
-                 reset_options: Optional[Callable[[int], Optional[dict]]] = None):
+                 reset_options: Optional[Callable[[int], Optional[dict]]] = None,
+                 before_replayed_episode: Optional[Callable[[Any, Any, int], None]] = None):
         super().__init__(config, directory, settings, success_fn)
         self.model_data = model_data
         self.reset_options = reset_options
@@ -106,7 +106,7 @@ class Experiment(RunRecord):
         self.render_fn = render_fn
         self.after_model_fit = after_model_fit
         self.before_policy_search = before_policy_search
-        self.before_replayed_episode: Optional[Callable[[Any, int], None]] = None
+        self.before_replayed_episode = before_replayed_episode
         self._make_env = make_env
         self.env = None
 

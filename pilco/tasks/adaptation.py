@@ -144,8 +144,8 @@ def recovered_within(episodes: int):
     return success
 
 
-def replay_damage(exp: Experiment, s: AdaptationSettings):
-    """``(view, episode) -> None`` for :attr:`Experiment.before_replayed_episode`: when a
+def replay_damage(s: AdaptationSettings):
+    """``(run, view, episode) -> None``, the run's ``before_replayed_episode``: when a
     replay of the run's learning (``python -m pilco.diagnose --episode N``) reaches the
     first damaged episode, the replayed agent gets what :func:`damage` gave the run's
     agent: the damaged arm's start state (that episode's first state) as ``m_init``, the
@@ -154,7 +154,7 @@ def replay_damage(exp: Experiment, s: AdaptationSettings):
     after the damage come from the run's state, and so do the joints that
     ``--stop-stuck-joints`` stopped commanding from the next episode on."""
 
-    def before(view, episode: int) -> None:
+    def before(exp: Experiment, view, episode: int) -> None:
         first = exp.summary_fields.get("damage_at_episode")
         inert = exp.task_state.get("inert_actions")
         if first is not None and episode > first and inert:
@@ -312,15 +312,14 @@ class AdaptationTask(reacher.ReacherTask):
 
     def hooks(self, s: AdaptationSettings, env) -> Dict[str, Any]:
         return dict(super().hooks(s, env), success_fn=recovered_within(RECOVER_WITHIN),
-                    model_data=damaged_arm_data)
+                    model_data=damaged_arm_data, before_replayed_episode=replay_damage(s))
 
     def prepare(self, exp: Experiment, s: AdaptationSettings) -> None:
-        """The adaptation's summary fields, and the damage redone by a replay."""
+        """The adaptation's summary fields and the data it tracks."""
         super().prepare(exp, s)
         exp.summary_fields = {"healthy_reached_at_episode": None, "damage_at_episode": None,
                               "episodes_to_recover": None, **exp.summary_fields}
         track_damage_data(exp)
-        exp.before_replayed_episode = replay_damage(exp, s)
 
     def run(self, exp: Experiment, s: AdaptationSettings) -> Dict[str, Any]:
         return run(exp, s)

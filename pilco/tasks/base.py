@@ -161,7 +161,7 @@ class Task:
     def hooks(self, settings: RunSettings, env) -> Dict[str, Any]:
         """Keyword arguments of :class:`~pilco.experiment.Experiment` beyond the config,
         the agent builder and the env: ``after_model_fit``, ``before_policy_search``,
-        ``success_fn``."""
+        ``success_fn``, ``model_data``, ``reset_options``, ``before_replayed_episode``."""
         return {}
 
     def experiment(self, settings: RunSettings) -> Experiment:
