@@ -1,0 +1,177 @@
+"""State constraints with a closed-form probability of violation under a Gaussian state.
+
+The moment-matched prediction gives, at every step of the horizon, a Gaussian state
+x ~ N(m, s); a constraint on the state then has a probability of being violated that is
+known in closed form and differentiable in (m, s), so that a policy search can weigh it
+(Safe PILCO: Polymenakos, Abate and Roberts, AAMAS 2019). Each constraint has
+``violation(m [1, D], s [D, D]) -> p []``:
+
+- :class:`HalfSpace`: violated where ``a·x > b``. ``a·x`` is Gaussian with mean ``a·m`` and
+  variance ``aᵀ s a``, so ``p = Φ((a·m - b) / sqrt(aᵀ s a))``, exact.
+- :class:`Box`: violated where some dimension ``x_d`` of ``dims`` leaves ``[low_d, high_d]``
+  (either bound may be infinite). Per dimension exact:
+  ``p_d = Φ((low_d - m_d) / σ_d) + Φ((m_d - high_d) / σ_d)``. Leaving the box is the union
+  of the dimensions' events, so ``combine="union"`` gives the bound ``min(1, Σ p_d)``,
+  never below the true probability (the conservative default), and
+  ``combine="independent"`` gives ``1 - Π (1 - p_d)``, exact when the dimensions are
+  uncorrelated and below the union bound always. With one dimension both are exact.
+- :class:`OnMap`: any of them on ``A x + c`` (a Gaussian of mean ``A m + c`` and covariance
+  ``A s Aᵀ``, exact), e.g. the reacher's gripper minus a point, or a sum of states.
+
+:func:`horizon_risk` combines the steps' probabilities ``p_t`` into the probability of a
+violation anywhere on the horizon: ``"independent"``, ``1 - Π (1 - p_t)`` (Safe PILCO's
+rule; the steps of one trajectory are not independent, so this is not a bound) or
+``"union"``, ``min(1, Σ p_t)`` (an upper bound on the true probability whatever the steps'
+dependence).
+
+Probabilities below ~1e-300 underflow to 0; the normal's tail is computed with ``erfc``,
+so small probabilities keep their relative precision.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+import tensorflow as tf
+from check_shapes import check_shapes
+from gpflow.config import default_float
+
+from .validation import check_entries, check_indices, check_matrix, check_positive_int
+
+__all__ = ["HalfSpace", "Box", "OnMap", "horizon_risk", "normal_tail", "COMBINE"]
+
+#: the ways of combining per-dimension or per-step probabilities
+COMBINE = ("union", "independent")
+
+
+def normal_tail(z):
+    """``P(Z > z)`` for a standard normal Z: ``erfc(z / √2) / 2`` (accurate far into the
+    tail, where ``1 - Φ(z)`` would round to 0)."""
+    return 0.5 * tf.math.erfc(z / math.sqrt(2.0))
+
+
+def _combine(p, combine: str):
+    """``p`` [K] of K events -> the probability of any of them (``COMBINE``)."""
+    if combine == "union":
+        return tf.minimum(tf.reduce_sum(p), tf.constant(1.0, p.dtype))
+    return 1.0 - tf.reduce_prod(1.0 - p)
+
+
+def _check_combine(combine: str) -> str:
+    if combine not in COMBINE:
+        raise ValueError(f"combine must be one of {', '.join(map(repr, COMBINE))}, got "
+                         f"{combine!r}")
+    return combine
+
+
+class HalfSpace:
+    """``a·x ≤ b`` must hold; ``violation`` is ``P(a·x > b)``, exact.
+
+    ``a`` [D] (not all zero), ``b`` a number; ``state_dim`` D.
+    """
+
+    def __init__(self, state_dim: int, a, b: float):
+        self.state_dim = D = check_positive_int(state_dim, "state_dim")
+        a = check_entries(a, D, "a")
+        if not np.any(a != 0):
+            raise ValueError("a must not be all zero: a half-space a·x <= b needs a direction")
+        self.a = tf.constant(a.reshape(D, 1), dtype=default_float())
+        self.b = float(check_entries([b], 1, "b")[0])
+
+    @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
+    def violation(self, m, s):
+        """``P(a·x > b)`` for x ~ N(m, s)."""
+        mean = tf.matmul(m, self.a)[0, 0]
+        var = tf.matmul(self.a, tf.matmul(s, self.a), transpose_a=True)[0, 0]
+        # a state known exactly (var 0): the violation is certain or impossible
+        std = tf.sqrt(tf.maximum(var, tf.constant(1e-300, var.dtype)))
+        return normal_tail((self.b - mean) / std)
+
+
+class Box:
+    """``low_d ≤ x_d ≤ high_d`` must hold for every d of ``dims``; ``violation`` is the
+    probability that some x_d leaves its interval, combined over the dimensions by
+    ``combine`` (module docstring: ``"union"`` a bound, ``"independent"``).
+
+    ``low``, ``high``: one number per dimension of ``dims`` (``-inf``/``inf`` for no bound;
+    ``low < high``).
+    """
+
+    def __init__(self, state_dim: int, dims: Sequence[int], low, high,
+                 combine: str = "union"):
+        self.state_dim = D = check_positive_int(state_dim, "state_dim")
+        self.dims = check_indices(dims, D, "dims")
+        k = len(self.dims)
+        if k == 0:
+            raise ValueError("dims must name at least one state dimension")
+        low = np.asarray(low, dtype=np.float64).reshape(-1)
+        high = np.asarray(high, dtype=np.float64).reshape(-1)
+        for name, v in (("low", low), ("high", high)):
+            if v.size != k:
+                raise ValueError(f"{name} must have one entry per dimension of dims ({k}), "
+                                 f"got {v.size}")
+            if np.any(np.isnan(v)):
+                raise ValueError(f"{name} must not hold NaN")
+        if not np.all(low < high):
+            raise ValueError(f"low must be below high in every dimension, got low {low} and "
+                             f"high {high}")
+        self.combine = _check_combine(combine)
+        self.low, self.high = low, high
+        self._has_low, self._has_high = np.isfinite(low), np.isfinite(high)
+        self._low = np.where(self._has_low, low, 0.0)
+        self._high = np.where(self._has_high, high, 0.0)
+        self._pick = tf.constant(np.eye(D)[:, list(self.dims)], dtype=default_float())
+
+    @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
+    def violation(self, m, s):
+        """The probability that x ~ N(m, s) leaves the box (by ``combine``)."""
+        return _combine(self.violations(m, s), self.combine)
+
+    @check_shapes("m: [1, D]", "s: [D, D]", "return: [K]")
+    def violations(self, m, s):
+        """``p_d`` [K] of each dimension of ``dims`` alone, exact."""
+        md = tf.matmul(m, self._pick)[0]
+        var = tf.linalg.diag_part(tf.matmul(self._pick, tf.matmul(s, self._pick),
+                                            transpose_a=True))
+        std = tf.sqrt(tf.maximum(var, tf.constant(1e-300, var.dtype)))
+        zero = tf.zeros_like(md)
+        # an infinite bound is never crossed: its term is 0 (computed at a finite stand-in)
+        below = tf.where(self._has_low, normal_tail((md - self._low) / std), zero)
+        above = tf.where(self._has_high, normal_tail((self._high - md) / std), zero)
+        return tf.minimum(below + above, tf.ones_like(md))
+
+
+class OnMap:
+    """A constraint on ``y = A x + c`` (``A`` [K, D], ``c`` [K]): ``violation(m, s)`` is
+    ``constraint.violation(A m + c, A s Aᵀ)``, exact for an exact ``constraint``."""
+
+    def __init__(self, state_dim: int, A, constraint, c=None):
+        self.state_dim = D = check_positive_int(state_dim, "state_dim")
+        A = np.asarray(A, dtype=np.float64)
+        if A.ndim != 2:
+            raise ValueError(f"A must be a matrix [K, {D}], got shape {A.shape}")
+        A = check_matrix(A, (A.shape[0], D), "A")
+        K = A.shape[0]
+        if getattr(constraint, "state_dim", None) != K:
+            raise ValueError(f"the constraint must read {K} dimensions (A's rows), it reads "
+                             f"{getattr(constraint, 'state_dim', None)}")
+        c = np.zeros(K) if c is None else check_entries(c, K, "c")
+        self.A = tf.constant(A, dtype=default_float())
+        self.c = tf.constant(c.reshape(1, K), dtype=default_float())
+        self.constraint = constraint
+
+    @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
+    def violation(self, m, s):
+        """The constraint's violation probability under the mapped Gaussian."""
+        my = tf.matmul(m, self.A, transpose_b=True) + self.c
+        sy = tf.matmul(self.A, tf.matmul(s, self.A, transpose_b=True))
+        return self.constraint.violation(my, 0.5 * (sy + tf.transpose(sy)))
+
+
+@check_shapes("p: [T]", "return: []")
+def horizon_risk(p, combine: str = "independent"):
+    """The probability of a violation at some step from the steps' ``p`` [T]: Safe PILCO's
+    ``1 - Π (1 - p_t)`` (``"independent"``) or the bound ``min(1, Σ p_t)`` (``"union"``)."""
+    return _combine(tf.convert_to_tensor(p, dtype=default_float()),
+                    _check_combine(combine))

@@ -1,0 +1,147 @@
+"""pilco.constraints: each constraint's violation probability against 2·10⁵ samples of the
+same Gaussian (within 3 standard errors), its gradient against finite differences, the
+union bound above the truth, the horizon's combination rules and the input checks."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import tensorflow as tf
+
+from pilco.constraints import Box, HalfSpace, OnMap, horizon_risk, normal_tail
+
+SAMPLES = 200_000
+
+
+def gaussian(D=3, seed=0, scale=0.3):
+    rng = np.random.default_rng(seed)
+    m = rng.normal(size=(1, D))
+    L = scale * rng.normal(size=(D, D))
+    return m, L @ L.T + 0.05 * np.eye(D)
+
+
+def samples(m, s, seed=1):
+    return np.random.default_rng(seed).multivariate_normal(m[0], s, size=SAMPLES)
+
+
+def within_three_se(p, hits):
+    freq = hits.mean()
+    se = np.sqrt(max(freq * (1 - freq), 1.0 / SAMPLES) / SAMPLES)
+    assert abs(float(p) - freq) <= 3 * se, (float(p), freq, se)
+
+
+def value(c, m, s):
+    return float(c.violation(tf.constant(m), tf.constant(s)))
+
+
+def test_half_space_is_exact():
+    m, s = gaussian()
+    x = samples(m, s)
+    for a, b in (([1.0, -0.5, 0.2], 0.3), ([0.0, 2.0, 0.0], -1.0), ([1.0, 1.0, 1.0], 2.5)):
+        c = HalfSpace(3, a, b)
+        within_three_se(value(c, m, s), x @ np.asarray(a) > b)
+
+
+@pytest.mark.parametrize("combine", ["union", "independent"])
+def test_box_per_dimension_exact_and_combined(combine):
+    m, s = gaussian(seed=2)
+    x = samples(m, s)
+    low, high = [-0.5, -np.inf, -1.0], [0.4, 0.2, np.inf]
+    box = Box(3, [0, 1, 2], low, high, combine=combine)
+    p_dims = box.violations(tf.constant(m), tf.constant(s)).numpy()
+    outside = (x < np.asarray(low)) | (x > np.asarray(high))
+    for d in range(3):  # each dimension alone: exact
+        within_three_se(p_dims[d], outside[:, d])
+    truth = outside.any(axis=1).mean()
+    p = value(box, m, s)
+    if combine == "union":  # a bound: never below the truth
+        assert p >= truth - 3 * np.sqrt(truth * (1 - truth) / SAMPLES)
+        assert p == pytest.approx(min(1.0, p_dims.sum()))
+    else:
+        assert p == pytest.approx(1 - np.prod(1 - p_dims))
+    # one dimension: both rules are exact
+    one = Box(3, [1], [-0.3], [0.3], combine=combine)
+    within_three_se(value(one, m, s), (x[:, 1] < -0.3) | (x[:, 1] > 0.3))
+
+
+def test_independent_rule_is_exact_for_uncorrelated_dimensions():
+    m = np.array([[0.1, -0.2, 0.4]])
+    s = np.diag([0.04, 0.09, 0.16])
+    x = samples(m, s)
+    box = Box(3, [0, 2], [-0.2, 0.0], [0.3, 0.6], combine="independent")
+    within_three_se(value(box, m, s), ((x[:, 0] < -0.2) | (x[:, 0] > 0.3)
+                                       | (x[:, 2] < 0.0) | (x[:, 2] > 0.6)))
+
+
+def test_a_constraint_on_a_linear_map_is_exact():
+    # the distance along the first axis between two points of the state stays below 0.5,
+    # and the sum of three states stays in a box
+    m, s = gaussian(D=4, seed=3)
+    x = samples(m, s)
+    A = np.array([[1.0, 0.0, -1.0, 0.0]])
+    c = OnMap(4, A, HalfSpace(1, [1.0], 0.5))
+    within_three_se(value(c, m, s), x @ A[0] > 0.5)
+    A2 = np.array([[1.0, 1.0, 1.0, 0.0], [0.0, 0.0, 0.0, 2.0]])
+    c2 = OnMap(4, A2, Box(2, [0], [-1.0], [1.0]), c=[0.1, 0.0])
+    y = x @ A2.T + np.array([0.1, 0.0])
+    within_three_se(value(c2, m, s), (y[:, 0] < -1.0) | (y[:, 0] > 1.0))
+
+
+@pytest.mark.parametrize("make", [
+    lambda: HalfSpace(3, [1.0, -0.5, 0.2], 0.3),
+    lambda: Box(3, [0, 2], [-0.5, -1.0], [0.4, np.inf]),
+    lambda: Box(3, [0, 1], [-0.5, -0.2], [0.4, 0.3], combine="independent"),
+    lambda: OnMap(3, [[1.0, 1.0, 0.0]], HalfSpace(1, [1.0], 0.2)),
+])
+def test_gradients_match_finite_differences(make):
+    c = make()
+    m, s = gaussian(seed=4)
+    m_t, s_t = tf.Variable(m), tf.Variable(s)
+    with tf.GradientTape() as tape:
+        p = c.violation(m_t, s_t)
+    gm, gs = tape.gradient(p, [m_t, s_t])
+    h = 1e-6
+    for i in range(3):
+        e = np.zeros_like(m)
+        e[0, i] = h
+        fd = (value(c, m + e, s) - value(c, m - e, s)) / (2 * h)
+        assert gm.numpy()[0, i] == pytest.approx(fd, rel=1e-5, abs=1e-9)
+    for i, j in ((0, 0), (1, 1), (0, 2)):
+        e = np.zeros_like(s)
+        e[i, j] = e[j, i] = h  # a symmetric change of s
+        fd = (value(c, m, s + e) - value(c, m, s - e)) / (2 * h)
+        analytic = gs.numpy()[i, j] + (gs.numpy()[j, i] if i != j else 0.0)
+        assert analytic == pytest.approx(fd, rel=1e-5, abs=1e-9)
+
+
+def test_far_tails_keep_their_precision_and_a_known_state_is_certain():
+    # 10 standard deviations out: ~7.6e-24, where 1 - Phi would round to 0
+    assert float(normal_tail(tf.constant(10.0, tf.float64))) == pytest.approx(7.6198530e-24,
+                                                                              rel=1e-6)
+    c = HalfSpace(2, [1.0, 0.0], 0.0)
+    assert value(c, np.array([[1.0, 0.0]]), np.zeros((2, 2))) == 1.0
+    assert value(c, np.array([[-1.0, 0.0]]), np.zeros((2, 2))) == 0.0
+
+
+def test_horizon_risk_rules():
+    p = np.array([0.1, 0.2, 0.05])
+    assert float(horizon_risk(p)) == pytest.approx(1 - 0.9 * 0.8 * 0.95)
+    assert float(horizon_risk(p, "union")) == pytest.approx(0.35)
+    assert float(horizon_risk(np.full(30, 0.1), "union")) == 1.0  # a bound, capped at 1
+    assert float(horizon_risk(p, "union")) >= float(horizon_risk(p))
+
+
+def test_bad_constraints_are_refused_with_their_reason():
+    with pytest.raises(ValueError, match="all zero"):
+        HalfSpace(2, [0.0, 0.0], 1.0)
+    with pytest.raises(ValueError, match="a must have 2 entries"):
+        HalfSpace(2, [1.0], 1.0)
+    with pytest.raises(ValueError, match="low must be below high"):
+        Box(2, [0], [1.0], [0.5])
+    with pytest.raises(ValueError, match="one entry per dimension of dims"):
+        Box(2, [0, 1], [0.0], [1.0, 2.0])
+    with pytest.raises(ValueError, match="combine must be one of"):
+        Box(2, [0], [0.0], [1.0], combine="max")
+    with pytest.raises(ValueError, match="must read 1 dimensions"):
+        OnMap(3, [[1.0, 0.0, 0.0]], HalfSpace(2, [1.0, 0.0], 0.0))
+    with pytest.raises(ValueError, match="combine must be one of"):
+        horizon_risk(np.array([0.1]), "sum")
