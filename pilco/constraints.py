@@ -30,16 +30,19 @@ so small probabilities keep their relative precision.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Any, Dict, Sequence
 
+import gpflow
 import numpy as np
 import tensorflow as tf
 from check_shapes import check_shapes
 from gpflow.config import default_float
 
-from .validation import check_entries, check_indices, check_matrix, check_positive_int
+from .validation import (check_entries, check_indices, check_matrix, check_non_negative_float,
+                         check_positive_int)
 
-__all__ = ["HalfSpace", "Box", "OnMap", "horizon_risk", "normal_tail", "COMBINE"]
+__all__ = ["HalfSpace", "Box", "OnMap", "ViolationPenalty", "horizon_risk", "step_violations",
+           "normal_tail", "constraint_config", "constraint_from_config", "COMBINE"]
 
 #: the ways of combining per-dimension or per-step probabilities
 COMBINE = ("union", "independent")
@@ -78,6 +81,10 @@ class HalfSpace:
             raise ValueError("a must not be all zero: a half-space a·x <= b needs a direction")
         self.a = tf.constant(a.reshape(D, 1), dtype=default_float())
         self.b = float(check_entries([b], 1, "b")[0])
+
+    def get_config(self) -> Dict[str, Any]:
+        """The arguments that rebuild it (:func:`constraint_from_config`)."""
+        return {"state_dim": self.state_dim, "a": self.a.numpy()[:, 0].tolist(), "b": self.b}
 
     @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
     def violation(self, m, s):
@@ -123,6 +130,13 @@ class Box:
         self._high = np.where(self._has_high, high, 0.0)
         self._pick = tf.constant(np.eye(D)[:, list(self.dims)], dtype=default_float())
 
+    def get_config(self) -> Dict[str, Any]:
+        """The arguments that rebuild it (:func:`constraint_from_config`; infinite bounds
+        as the strings ``"-inf"``/``"inf"``)."""
+        return {"state_dim": self.state_dim, "dims": list(self.dims),
+                "low": [_number(v) for v in self.low], "high": [_number(v) for v in self.high],
+                "combine": self.combine}
+
     @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
     def violation(self, m, s):
         """The probability that x ~ N(m, s) leaves the box (by ``combine``)."""
@@ -161,6 +175,12 @@ class OnMap:
         self.c = tf.constant(c.reshape(1, K), dtype=default_float())
         self.constraint = constraint
 
+    def get_config(self) -> Dict[str, Any]:
+        """The arguments that rebuild it, the inner constraint's included."""
+        return {"state_dim": self.state_dim, "A": self.A.numpy().tolist(),
+                "constraint": constraint_config(self.constraint),
+                "c": self.c.numpy()[0].tolist()}
+
     @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
     def violation(self, m, s):
         """The constraint's violation probability under the mapped Gaussian."""
@@ -175,3 +195,95 @@ def horizon_risk(p, combine: str = "independent"):
     ``1 - Π (1 - p_t)`` (``"independent"``) or the bound ``min(1, Σ p_t)`` (``"union"``)."""
     return _combine(tf.convert_to_tensor(p, dtype=default_float()),
                     _check_combine(combine))
+
+
+@check_shapes("M: [T, D]", "S: [T, D, D]", "return: [T]")
+def step_violations(constraint, M, S) -> np.ndarray:
+    """Each step's violation probability of a predicted trajectory (``M`` [T, D], ``S``
+    [T, D, D], e.g. :meth:`pilco.models.PILCO.predict_trajectory`), as a NumPy array."""
+    M = np.asarray(M, dtype=np.float64)
+    S = np.asarray(S, dtype=np.float64)
+    return np.array([float(constraint.violation(tf.constant(M[t:t + 1]), tf.constant(S[t])))
+                     for t in range(len(M))])
+
+
+class ViolationPenalty(gpflow.base.Module):
+    """A reward that is minus ``weight`` times a constraint's violation, so that a policy
+    search on ``CombinedRewards(D, [task_reward, ViolationPenalty(c, mu)])`` maximises the
+    expected return minus ``mu`` times the horizon's risk, in the one compiled objective.
+
+    Summed over the steps, ``form="union"`` (the default) subtracts ``mu Σ p_t``, the union
+    bound on the horizon's risk (uncapped); ``form="independent"`` subtracts
+    ``mu Σ -log(1 - p_t) = -mu log(1 - risk)`` with the risk by the independent rule
+    (p_t capped at 1 - 1e-12), which grows without bound as the risk nears 1. ``weight`` is
+    a non-trainable ``gpflow.Parameter``: assigning it (Safe PILCO's ``mu`` going up or down)
+    keeps the compiled objective. The variance of this reward is 0 (it is a function of the
+    state's distribution, not of the state)."""
+
+    FORMS = ("union", "independent")
+
+    def __init__(self, constraint, weight: float = 1.0, form: str = "union"):
+        super().__init__()
+        if not callable(getattr(constraint, "violation", None)):
+            raise TypeError(f"constraint must have violation(m, s), got "
+                            f"{type(constraint).__name__}")
+        if form not in self.FORMS:
+            raise ValueError(f"form must be 'union' or 'independent', got {form!r}")
+        self.state_dim = check_positive_int(getattr(constraint, "state_dim", None),
+                                            "constraint.state_dim")
+        self.constraint = constraint
+        self.form = form
+        self.weight = gpflow.Parameter(check_non_negative_float(weight, "weight"),
+                                       trainable=False)
+
+    @check_shapes("m: [1, D]", "s: [D, D]", "return[0]: [1, 1]", "return[1]: [1, 1]")
+    def moments(self, m, s):
+        """``(-weight · p, 0)`` (union) or ``(weight · log(1 - p), 0)`` (independent)."""
+        p = self.constraint.violation(m, s)
+        if self.form == "independent":
+            cost = -tf.math.log1p(-tf.minimum(p, tf.constant(1.0 - 1e-12, p.dtype)))
+        else:
+            cost = p
+        mean = tf.reshape(-tf.convert_to_tensor(self.weight) * cost, (1, 1))
+        return mean, tf.zeros_like(mean)
+
+    def get_config(self) -> Dict[str, Any]:
+        """The arguments that rebuild it (``weight`` comes back from the agent file)."""
+        return {"constraint": constraint_config(self.constraint), "weight": 1.0,
+                "form": self.form}
+
+    @classmethod
+    def from_config(cls, config: Dict[str, Any]) -> "ViolationPenalty":
+        return cls(constraint_from_config(config["constraint"]), config.get("weight", 1.0),
+                   config.get("form", "union"))
+
+
+#: the constraint classes :func:`constraint_from_config` rebuilds, by name
+_CLASSES = {"HalfSpace": HalfSpace, "Box": Box, "OnMap": OnMap}
+
+
+def _number(v: float):
+    return float(v) if np.isfinite(v) else ("inf" if v > 0 else "-inf")
+
+
+def constraint_config(constraint) -> Dict[str, Any]:
+    """``{"class": name, "config": ...}`` of a constraint of this module (JSON-ready)."""
+    name = type(constraint).__name__
+    if _CLASSES.get(name) is not type(constraint):
+        raise TypeError(f"only the constraints of pilco.constraints can be stored, got {name}")
+    return {"class": name, "config": constraint.get_config()}
+
+
+def constraint_from_config(spec: Dict[str, Any]):
+    """The constraint :func:`constraint_config` described."""
+    cls = _CLASSES.get(spec.get("class"))
+    if cls is None:
+        raise ValueError(f"unknown constraint class {spec.get('class')!r}; known: "
+                         f"{', '.join(_CLASSES)}")
+    config = dict(spec["config"])
+    if cls is Box:
+        config["low"] = [float(v) for v in config["low"]]
+        config["high"] = [float(v) for v in config["high"]]
+    if cls is OnMap:
+        config["constraint"] = constraint_from_config(config["constraint"])
+    return cls(**config)

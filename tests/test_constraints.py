@@ -145,3 +145,74 @@ def test_bad_constraints_are_refused_with_their_reason():
         OnMap(3, [[1.0, 0.0, 0.0]], HalfSpace(2, [1.0, 0.0], 0.0))
     with pytest.raises(ValueError, match="combine must be one of"):
         horizon_risk(np.array([0.1]), "sum")
+
+
+# ------------------------------------------------------- the penalty in the policy objective
+def small_agent(reward):
+    """A 2-state agent whose first state follows the action: u drives x0 up or down."""
+    from pilco.controllers import LinearController
+    from pilco.models import PILCO
+
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-1.0, 1.0, (30, 3))
+    Y = np.stack([0.3 * X[:, 2], -0.1 * X[:, 1]], axis=1)
+    controller = LinearController(2, 1, max_action=1.0)
+    controller.W.assign([[0.0, 0.0]])
+    controller.b.assign([[0.5]])
+    return PILCO((X, Y), controller, reward, horizon=5, m_init=np.zeros((1, 2)),
+                 S_init=0.01 * np.eye(2))
+
+
+def test_the_penalty_subtracts_weight_times_each_steps_violation():
+    from pilco.constraints import ViolationPenalty, step_violations
+    from pilco.rewards import CombinedRewards, ExponentialReward
+
+    task = ExponentialReward(2, t=[[1.0, 0.0]])
+    wall = HalfSpace(2, [1.0, 0.0], 0.4)  # x0 must stay at or below 0.4
+    penalty = ViolationPenalty(wall, weight=3.0)
+    agent = small_agent(CombinedRewards(2, [task, penalty]))
+    M, S = agent.predict_trajectory()
+    p = step_violations(wall, M, S)
+    assert p[0] < 1e-4 and p[-1] > 0.5  # the policy pushes x0 over the wall
+    plain = small_agent(task).expected_return()
+    assert agent.expected_return() == pytest.approx(plain - 3.0 * p[1:].sum(), rel=1e-10)
+    # Safe PILCO's mu changes the objective without a new reward
+    penalty.weight.assign(0.0)
+    assert agent.expected_return() == pytest.approx(plain, rel=1e-12)
+    # the independent form: -mu log(1 - risk) of the independent rule
+    log_form = ViolationPenalty(wall, weight=2.0, form="independent")
+    agent = small_agent(CombinedRewards(2, [task, log_form]))
+    risk = float(horizon_risk(p[1:]))
+    assert agent.expected_return() == pytest.approx(plain + 2.0 * np.log(1 - risk), rel=1e-9)
+
+
+def test_a_policy_search_with_the_penalty_lowers_the_risk():
+    from pilco.constraints import ViolationPenalty, step_violations
+    from pilco.rewards import CombinedRewards, ExponentialReward
+
+    task = ExponentialReward(2, t=[[1.0, 0.0]])  # the target lies beyond the wall
+    wall = HalfSpace(2, [1.0, 0.0], 0.4)
+    risks = {}
+    for mu in (0.0, 5.0):
+        agent = small_agent(CombinedRewards(2, [task, ViolationPenalty(wall, weight=mu)]))
+        agent.optimize_policy(maxiter=30, restarts=1)
+        M, S = agent.predict_trajectory()
+        risks[mu] = float(horizon_risk(step_violations(wall, M, S)[1:]))
+    assert risks[0.0] > 0.5 and risks[5.0] < 0.5 * risks[0.0]
+
+
+def test_the_penalty_and_its_constraint_are_saved_with_the_agent(tmp_path):
+    from pilco.constraints import ViolationPenalty
+    from pilco.models import PILCO
+    from pilco.rewards import CombinedRewards, ExponentialReward
+
+    box = OnMap(2, [[1.0, 1.0]], Box(1, [0], [-np.inf], [0.6], combine="independent"))
+    penalty = ViolationPenalty(box, weight=1.0)
+    penalty.weight.assign(4.5)  # raised by a safe loop: comes back from the file
+    agent = small_agent(CombinedRewards(2, [ExponentialReward(2, t=[[1.0, 0.0]]), penalty]))
+    loaded = PILCO.load(agent.save(tmp_path / "agent.npz"))
+    back = loaded.reward.base_rewards[1]
+    assert type(back) is ViolationPenalty and float(back.weight.numpy()) == 4.5
+    assert type(back.constraint.constraint) is Box and back.constraint.constraint.high[0] == 0.6
+    assert np.isneginf(back.constraint.constraint.low[0])
+    assert loaded.expected_return() == agent.expected_return()
