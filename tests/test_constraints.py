@@ -216,3 +216,58 @@ def test_the_penalty_and_its_constraint_are_saved_with_the_agent(tmp_path):
     assert type(back.constraint.constraint) is Box and back.constraint.constraint.high[0] == 0.6
     assert np.isneginf(back.constraint.constraint.low[0])
     assert loaded.expected_return() == agent.expected_return()
+
+
+# ------------------------------------------------------------ the safe policy search
+def test_the_safe_search_raises_mu_until_the_policy_is_below_the_threshold():
+    from pilco.constraints import ViolationPenalty
+    from pilco.models.safe import predicted_risk, safe_policy_search
+    from pilco.rewards import CombinedRewards, ExponentialReward
+
+    wall = HalfSpace(2, [1.0, 0.0], 0.4)
+    penalty = ViolationPenalty(wall, weight=0.01)  # too small to keep the policy back
+    agent = small_agent(CombinedRewards(2, [ExponentialReward(2, t=[[1.0, 0.0]]), penalty]))
+    result = safe_policy_search(agent, 0.05, attempts=12, raise_by=3.0, maxiter=30)
+    assert result.safe and not result.fallback and result.risk <= 0.05
+    assert result.risk == pytest.approx(predicted_risk(agent, wall))
+    weights = [t["weight"] for t in result.tries]
+    assert len(weights) > 1 and all(b == pytest.approx(3.0 * a)
+                                    for a, b in zip(weights, weights[1:]))
+    assert all(t["risk"] > 0.05 for t in result.tries[:-1])
+    record = result.as_record()
+    assert record["safe"] is True and len(record["tries"]) == len(weights)
+
+
+def test_an_unsafe_search_keeps_the_safe_policy_it_started_from_or_says_so():
+    from pilco.constraints import ViolationPenalty
+    from pilco.models.safe import predicted_risk, safe_policy_search
+    from pilco.rewards import CombinedRewards, ExponentialReward
+
+    wall = HalfSpace(2, [1.0, 0.0], 0.4)
+    agent = small_agent(CombinedRewards(2, [ExponentialReward(2, t=[[1.0, 0.0]]),
+                                            ViolationPenalty(wall, weight=0.0)]))
+    agent.controller.b.assign([[0.0]])  # the policy that ran: stays at 0, safe
+    before = agent.controller.b.numpy().copy()
+    assert predicted_risk(agent, wall) < 0.01
+    # mu 0 stays 0 when raised: every search runs over the wall
+    result = safe_policy_search(agent, 0.05, attempts=2, maxiter=30)
+    assert result.safe and result.fallback and len(result.tries) == 2
+    assert all(t["risk"] > 0.05 for t in result.tries)
+    np.testing.assert_array_equal(agent.controller.b.numpy(), before)
+    # the same from a policy that was over the wall already: nothing safe to keep
+    agent.controller.b.assign([[1.0]])
+    result = safe_policy_search(agent, 0.05, attempts=1, maxiter=30)
+    assert not result.safe and not result.fallback
+
+
+def test_the_safe_search_checks_its_arguments():
+    from pilco.models.safe import safe_policy_search
+    from pilco.rewards import ExponentialReward
+
+    agent = small_agent(ExponentialReward(2))
+    with pytest.raises(ValueError, match="one ViolationPenalty"):
+        safe_policy_search(agent, 0.1)
+    with pytest.raises(ValueError, match="below 1"):
+        safe_policy_search(agent, 1.5)
+    with pytest.raises(ValueError, match="raise_by must be above 1"):
+        safe_policy_search(agent, 0.1, raise_by=0.9)

@@ -15,7 +15,8 @@ One job per module:
 - ``starts``: start distributions of one or several tasks, checked and split;
 - ``transitions``: the raw transitions kept in step with the GP's data;
 - ``storage``: the agent and policy file layout;
-- ``custom``: rewards and controllers of your own in agent files.
+- ``custom``: rewards and controllers of your own in agent files;
+- ``safe``: Safe PILCO's policy search (a policy runs only below a predicted risk).
 """
 from .mgpr import MGPR
 from .smgpr import SMGPR

@@ -1,0 +1,119 @@
+"""Safe PILCO's policy search: a policy runs only when its predicted risk is below a threshold.
+
+:func:`safe_policy_search` searches the agent's policy on the risk-penalised objective
+(the agent's reward holds a :class:`pilco.constraints.ViolationPenalty` of weight ``mu``),
+predicts the horizon's risk of the policy it found and:
+
+- accepts it when the risk is at most ``threshold``, and lowers ``mu`` (×``lower_by``) when
+  the risk is below ``far_below × threshold`` (the penalty need not weigh so much);
+- otherwise raises ``mu`` (×``raise_by``) and searches again, up to ``attempts`` searches;
+- after the last, puts back the policy it started from when that one meets the threshold
+  (a policy that ran safely before), else leaves the last one in place; either way the
+  result says the search found no safe policy (``safe`` False), and the caller must not run
+  an unsafe one on the system.
+
+The risk is that of the agent's own start distribution, by ``rule`` (``"independent"``,
+Safe PILCO's, or the ``"union"`` bound; :func:`pilco.constraints.horizon_risk`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Any, Dict, List
+
+from ..constraints import COMBINE, ViolationPenalty, horizon_risk, step_violations
+from ..validation import check_positive_float, check_positive_int
+
+__all__ = ["SafeSearch", "predicted_risk", "safe_policy_search"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass
+class SafeSearch:
+    """What :func:`safe_policy_search` did.
+
+    ``safe``: the policy in place meets the threshold; ``risk``: its predicted risk;
+    ``fallback``: the policy in place is the one the search started from (the searched ones
+    were all above the threshold); ``weight``: ``mu`` after the search; ``tries``: per
+    search, ``{"weight", "risk", "expected_return"}``.
+    """
+
+    safe: bool
+    risk: float
+    fallback: bool
+    weight: float
+    tries: List[Dict[str, float]]
+
+    def as_record(self) -> Dict[str, Any]:
+        """JSON-ready, for an episode's record."""
+        return dataclasses.asdict(self)
+
+
+def predicted_risk(agent, constraint, rule: str = "independent") -> float:
+    """The predicted probability that the agent's policy violates ``constraint`` at some
+    step of its horizon, from its start distribution (steps 1..H of
+    :meth:`~pilco.models.PILCO.predict_trajectory`)."""
+    M, S = agent.predict_trajectory()
+    return float(horizon_risk(step_violations(constraint, M, S)[1:], rule))
+
+
+def _penalty_of(reward) -> ViolationPenalty:
+    if isinstance(reward, ViolationPenalty):
+        return reward
+    found = [p for r in getattr(reward, "base_rewards", ())
+             for p in ([r] if isinstance(r, ViolationPenalty) else [])]
+    if len(found) != 1:
+        raise ValueError("the agent's reward must hold one ViolationPenalty (e.g. "
+                         "CombinedRewards(D, [task_reward, ViolationPenalty(constraint, mu)]))"
+                         f"; found {len(found)}")
+    return found[0]
+
+
+def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: float = 1.5,
+                       lower_by: float = 0.75, far_below: float = 0.5,
+                       rule: str = "independent", **optimize: Any) -> SafeSearch:
+    """Search the agent's policy until its predicted risk is at most ``threshold`` (module
+    docstring); ``optimize``: keyword arguments of
+    :meth:`~pilco.models.PILCO.optimize_policy`. Returns a :class:`SafeSearch`."""
+    threshold = check_positive_float(threshold, "threshold")
+    if threshold >= 1.0:
+        raise ValueError(f"threshold must be below 1 (a probability), got {threshold}")
+    attempts = check_positive_int(attempts, "attempts")
+    raise_by = check_positive_float(raise_by, "raise_by")
+    lower_by = check_positive_float(lower_by, "lower_by")
+    far_below = check_positive_float(far_below, "far_below")
+    if raise_by <= 1.0 or lower_by >= 1.0 or far_below >= 1.0:
+        raise ValueError("raise_by must be above 1, lower_by and far_below below 1")
+    if rule not in COMBINE:
+        raise ValueError(f"rule must be one of {COMBINE}, got {rule!r}")
+    penalty = _penalty_of(agent.reward)
+    constraint = penalty.constraint
+    start = [v.numpy() for v in agent.controller.trainable_variables]
+    start_risk = predicted_risk(agent, constraint, rule)
+    tries: List[Dict[str, float]] = []
+    for _ in range(attempts):
+        weight = float(penalty.weight.numpy())
+        value = agent.optimize_policy(**optimize)
+        risk = predicted_risk(agent, constraint, rule)
+        tries.append({"weight": weight, "risk": risk, "expected_return": float(value)})
+        if risk <= threshold:
+            if risk < far_below * threshold:
+                penalty.weight.assign(weight * lower_by)
+            return SafeSearch(True, risk, False, float(penalty.weight.numpy()), tries)
+        logger.info("policy predicted to violate the constraint with probability %.3g > "
+                    "%.3g: mu %.3g -> %.3g, searched again", risk, threshold, weight,
+                    weight * raise_by)
+        penalty.weight.assign(weight * raise_by)
+    if start_risk <= threshold:
+        for v, x in zip(agent.controller.trainable_variables, start):
+            v.assign(x)
+        logger.warning("no policy below the risk threshold %.3g in %d searches: the policy "
+                       "the search started from (risk %.3g) is kept", threshold, attempts,
+                       start_risk)
+        return SafeSearch(True, start_risk, True, float(penalty.weight.numpy()), tries)
+    logger.warning("no policy below the risk threshold %.3g in %d searches, and the one the "
+                   "search started from is above it too (risk %.3g): do not run it",
+                   threshold, attempts, start_risk)
+    return SafeSearch(False, float(tries[-1]["risk"]), False, float(penalty.weight.numpy()),
+                      tries)
