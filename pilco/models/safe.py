@@ -5,7 +5,8 @@
 predicts the horizon's risk of the policy it found and:
 
 - accepts it when the risk is at most ``threshold``, and lowers ``mu`` (×``lower_by``) when
-  the risk is below ``far_below × threshold`` (the penalty need not weigh so much);
+  the risk is below ``far_below × threshold`` (the penalty need not weigh so much; a
+  quarter of the threshold by default, as the paper's published script);
 - otherwise raises ``mu`` (×``raise_by``) and searches again, up to ``attempts`` searches;
 - after the last, puts back the policy it started from when that one meets the threshold
   (a policy that ran safely before), else leaves the last one in place; either way the
@@ -71,7 +72,7 @@ def _penalty_of(reward) -> ViolationPenalty:
 
 
 def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: float = 1.5,
-                       lower_by: float = 0.75, far_below: float = 0.5,
+                       lower_by: float = 0.75, far_below: float = 0.25,
                        rule: str = "independent", **optimize: Any) -> SafeSearch:
     """Search the agent's policy until its predicted risk is at most ``threshold`` (module
     docstring); ``optimize``: keyword arguments of
