@@ -15,6 +15,10 @@ known in closed form and differentiable in (m, s), so that a policy search can w
   never below the true probability (the conservative default), and
   ``combine="independent"`` gives ``1 - Π (1 - p_d)``, exact when the dimensions are
   uncorrelated and below the union bound always. With one dimension both are exact.
+- :class:`Region`: violated where every x_d of ``dims`` lies in its interval at once (a
+  region to stay out of, e.g. two cars in a crossing together): exact for one dimension;
+  across several the bound ``min_d P(inside_d)`` (never below the truth, the default) or the
+  product ``Π P(inside_d)``, exact when the dimensions are uncorrelated.
 - :class:`OnMap`: any of them on ``A x + c`` (a Gaussian of mean ``A m + c`` and covariance
   ``A s Aᵀ``, exact), e.g. the reacher's gripper minus a point, or a sum of states.
 
@@ -41,8 +45,9 @@ from gpflow.config import default_float
 from .validation import (check_entries, check_indices, check_matrix, check_non_negative_float,
                          check_positive_int)
 
-__all__ = ["HalfSpace", "Box", "OnMap", "ViolationPenalty", "horizon_risk", "step_violations",
-           "normal_tail", "constraint_config", "constraint_from_config", "COMBINE"]
+__all__ = ["HalfSpace", "Box", "Region", "OnMap", "ViolationPenalty", "horizon_risk",
+           "step_violations", "normal_tail", "constraint_config", "constraint_from_config",
+           "COMBINE"]
 
 #: the ways of combining per-dimension or per-step probabilities
 COMBINE = ("union", "independent")
@@ -156,6 +161,41 @@ class Box:
         return tf.minimum(below + above, tf.ones_like(md))
 
 
+class Region:
+    """A region the state must stay out of: ``low_d ≤ x_d ≤ high_d`` for every d of
+    ``dims`` at once (e.g. two cars inside a crossing together). ``violation`` is the
+    probability of being inside: exact for one dimension; across several, by ``combine``:
+    ``"bound"`` (the default) ``min_d P(inside_d)``, never below the truth (being inside all
+    intervals implies being inside each), or ``"independent"`` ``Π P(inside_d)``, exact when
+    the dimensions are uncorrelated. Bounds as :class:`Box` (finite here: a region with an
+    open side is a :class:`HalfSpace` or a :class:`Box`)."""
+
+    COMBINE = ("bound", "independent")
+
+    def __init__(self, state_dim: int, dims: Sequence[int], low, high,
+                 combine: str = "bound"):
+        if combine not in self.COMBINE:
+            raise ValueError(f"combine must be 'bound' or 'independent', got {combine!r}")
+        low = check_entries(low, len(list(dims)), "low")
+        high = check_entries(high, len(list(dims)), "high")
+        self._box = Box(state_dim, dims, low, high)
+        self.state_dim, self.dims = self._box.state_dim, self._box.dims
+        self.low, self.high, self.combine = low, high, combine
+
+    @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
+    def violation(self, m, s):
+        """The probability that x ~ N(m, s) is inside the region (by ``combine``)."""
+        inside = 1.0 - self._box.violations(m, s)
+        if self.combine == "independent":
+            return tf.reduce_prod(inside)
+        return tf.reduce_min(inside)
+
+    def get_config(self) -> Dict[str, Any]:
+        """The arguments that rebuild it (:func:`constraint_from_config`)."""
+        return {"state_dim": self.state_dim, "dims": list(self.dims), "low": self.low.tolist(),
+                "high": self.high.tolist(), "combine": self.combine}
+
+
 class OnMap:
     """A constraint on ``y = A x + c`` (``A`` [K, D], ``c`` [K]): ``violation(m, s)`` is
     ``constraint.violation(A m + c, A s Aᵀ)``, exact for an exact ``constraint``."""
@@ -259,7 +299,7 @@ class ViolationPenalty(gpflow.base.Module):
 
 
 #: the constraint classes :func:`constraint_from_config` rebuilds, by name
-_CLASSES = {"HalfSpace": HalfSpace, "Box": Box, "OnMap": OnMap}
+_CLASSES = {"HalfSpace": HalfSpace, "Box": Box, "Region": Region, "OnMap": OnMap}
 
 
 def _number(v: float):

@@ -271,3 +271,26 @@ def test_the_safe_search_checks_its_arguments():
         safe_policy_search(agent, 1.5)
     with pytest.raises(ValueError, match="raise_by must be above 1"):
         safe_policy_search(agent, 0.1, raise_by=0.9)
+
+
+@pytest.mark.parametrize("combine", ["bound", "independent"])
+def test_a_region_to_stay_out_of(combine):
+    from pilco.constraints import Region
+
+    m, s = gaussian(seed=5, scale=0.5)
+    x = samples(m, s)
+    region = Region(3, [0, 2], [-0.5, -1.0], [1.0, 0.5], combine=combine)
+    inside = ((x[:, 0] >= -0.5) & (x[:, 0] <= 1.0) & (x[:, 2] >= -1.0) & (x[:, 2] <= 0.5))
+    truth, p = inside.mean(), value(region, m, s)
+    if combine == "bound":
+        assert p >= truth - 3 * np.sqrt(truth * (1 - truth) / SAMPLES)
+    one = Region(3, [1], [-0.2], [0.3], combine=combine)  # one dimension: exact
+    within_three_se(value(one, m, s), (x[:, 1] >= -0.2) & (x[:, 1] <= 0.3))
+    # uncorrelated dimensions: the product is exact
+    m2, s2 = np.array([[0.2, 0.0, -0.3]]), np.diag([0.09, 0.04, 0.25])
+    x2 = samples(m2, s2)
+    indep = Region(3, [0, 2], [-0.5, -1.0], [1.0, 0.5], combine="independent")
+    within_three_se(value(indep, m2, s2), (x2[:, 0] >= -0.5) & (x2[:, 0] <= 1.0)
+                    & (x2[:, 2] >= -1.0) & (x2[:, 2] <= 0.5))
+    with pytest.raises(ValueError, match="combine must be 'bound' or 'independent'"):
+        Region(3, [0], [0.0], [1.0], combine="union")
