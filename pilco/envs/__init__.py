@@ -9,6 +9,8 @@ Importing this package registers (once; importing again is harmless):
   ``damage_mode="stuck"``, the paper's damage).
 - ``pilco/PendulumSwingUp-v0``: :class:`PendulumSwingUp`, gymnasium's Pendulum-v1 from
   hanging down with each action held for 3 of its steps, 40 steps.
+- ``pilco/TwoCarsCrossing-v0``: :class:`TwoCarsCrossing`, Safe PILCO's two cars at a
+  crossing, 25 steps of 0.5 s.
 
 Constructor arguments pass through ``gymnasium.make``; e.g. the arm of the paper's
 published scripts (commanded joint angles in the state: the running sum of the actions,
@@ -31,6 +33,7 @@ import logging
 import gymnasium
 
 from pilco.envs.cartpole import CartPoleSwingUp
+from pilco.envs.crossing import TwoCarsCrossing
 from pilco.envs.fetch_context import TargetInState
 from pilco.envs.fetch_damage import DamageFlag
 from pilco.envs.fetch_reach_bound import ReachBound, fewest_steps
@@ -43,6 +46,7 @@ __all__ = [
     "ARM_JOINTS",
     "CARTPOLE_ID",
     "CartPoleSwingUp",
+    "CROSSING_ID",
     "DamageFlag",
     "FETCH_DAMAGED_ID",
     "FETCH_ID",
@@ -51,6 +55,7 @@ __all__ = [
     "PendulumSwingUp",
     "ReachBound",
     "TargetInState",
+    "TwoCarsCrossing",
     "fewest_steps",
     "register_envs",
 ]
@@ -59,6 +64,7 @@ CARTPOLE_ID = "pilco/CartPoleSwingUp-v0"
 FETCH_ID = "pilco/FetchJointReacher-v0"
 FETCH_DAMAGED_ID = "pilco/FetchJointReacherDamaged-v0"
 PENDULUM_ID = "pilco/PendulumSwingUp-v0"
+CROSSING_ID = "pilco/TwoCarsCrossing-v0"
 
 _SPECS = (
     (CARTPOLE_ID, "pilco.envs.cartpole:CartPoleSwingUp", 40, {}),
@@ -70,6 +76,7 @@ _SPECS = (
         {"damaged_joints": ("elbow_flex",), "damage_mode": "stuck"},
     ),
     (PENDULUM_ID, "pilco.envs.pendulum:PendulumSwingUp", 40, {}),
+    (CROSSING_ID, "pilco.envs.crossing:TwoCarsCrossing", 25, {}),
 )
 
 
