@@ -75,3 +75,20 @@ def test_a_run_records_its_arithmetic(monkeypatch):
     assert set(state) == {"portable", "numpy_avx512", "blas", "numpy"}
     monkeypatch.setenv("OPENBLAS_CORETYPE", "Haswell")
     assert prov.provenance()["environment"]["OPENBLAS_CORETYPE"] == "Haswell"
+
+
+def test_a_replay_that_parts_says_how_to_run_the_runs_own_arithmetic(tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    from pilco.diagnose.replay import _arithmetic_hint
+
+    summary = tmp_path / "summary.json"
+    run = SimpleNamespace(store=SimpleNamespace(summary_path=str(summary)))
+    monkeypatch.setattr(portable, "arithmetic_state", lambda: {"portable": True})
+    summary.write_text(json.dumps({"provenance": {"cpu": "x"}}))  # before it was recorded
+    assert "PILCO_PORTABLE_ARITHMETIC=0" in _arithmetic_hint(run)
+    summary.write_text(json.dumps({"provenance": {"arithmetic": {"portable": True}}}))
+    assert _arithmetic_hint(run) == ""
+    monkeypatch.setattr(portable, "arithmetic_state", lambda: {"portable": False})
+    summary.write_text(json.dumps({"provenance": {"arithmetic": {"portable": False}}}))
+    assert _arithmetic_hint(run) == ""  # this process runs the CPU's own arithmetic too

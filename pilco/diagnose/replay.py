@@ -105,5 +105,24 @@ def agent_of_episode(exp, episode: int, replay: bool = False, tolerance: float =
     if err > tolerance:
         logger.warning("the replayed policy differs from the run's (actions differ by up to "
                        "%.3g; another machine or thread count changes the optimiser's "
-                       "path): the diagnosis is of the replayed policy", err)
+                       "path%s): the diagnosis is of the replayed policy", err,
+                       _arithmetic_hint(exp))
     return view, {"source": "replay", "action_error": err}
+
+
+def _arithmetic_hint(exp) -> str:
+    """When the run did not record the portable arithmetic (:mod:`pilco.portable`) and this
+    process runs it, how to replay with the run's own."""
+    import json
+
+    from ..portable import SWITCH, arithmetic_state
+
+    try:
+        with open(exp.store.summary_path, encoding="utf-8") as fh:
+            ran = json.load(fh).get("provenance", {}).get("arithmetic") or {}
+    except (OSError, ValueError, AttributeError):
+        return ""
+    if ran.get("portable") is True or arithmetic_state()["portable"] is not True:
+        return ""
+    return (f"; the run did not run the portable arithmetic this process runs: "
+            f"{SWITCH}=0 replays with its CPU's own")
