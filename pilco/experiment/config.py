@@ -255,7 +255,9 @@ class ExperimentConfig(LoopSettings):
         cost_width: width of the saturating cost of the distance (summary ``cost``).
         success_threshold: distance [m] counted as "at the target".
         solved_rule: ``"reach"``: an episode is solved when any state is within the
-            threshold; ``"hold"``: when the last ``hold_steps`` states all are.
+            threshold; ``"hold"``: when the last ``hold_steps`` states all are;
+            ``"survive"``: when it lasted ``hold_steps`` steps (an env that terminates on
+            failure).
         render: record frames of the final episode.
         predictions: before each learned episode, store the model's multi-step
             predictions and, after it, its one-step predictions (for the figures).
@@ -281,8 +283,8 @@ class ExperimentConfig(LoopSettings):
             if not _whole(getattr(self, name), 1):
                 raise ValueError(f"{name} must be a whole number >= 1, got "
                                  f"{getattr(self, name)!r}")
-        if self.solved_rule not in ("reach", "hold"):
-            raise ValueError(f"solved_rule must be 'reach' or 'hold', got "
+        if self.solved_rule not in ("reach", "hold", "survive"):
+            raise ValueError(f"solved_rule must be 'reach', 'hold' or 'survive', got "
                              f"{self.solved_rule!r}")
         for name in (*OFF_WHEN_ZERO, "max_data"):
             if getattr(self, name) == 0:

@@ -32,11 +32,14 @@ def episode_solved(episode: Episode, config: ExperimentConfig) -> bool:
 def distances_solved(distances, config: ExperimentConfig) -> bool:
     """The task's rule on an episode's distances ``[T+1]`` (the start state is not
     counted): ``"reach"``, any state within ``success_threshold``; ``"hold"``, the last
-    ``hold_steps`` states all within it."""
+    ``hold_steps`` states all within it; ``"survive"``, the episode lasted ``hold_steps``
+    steps (an environment that terminates when it fails, e.g. a pole that falls)."""
     d = np.asarray(distances, dtype=np.float64)[1:]
     if len(d) == 0 or not np.all(np.isfinite(d)):
         return False
     thr = config.success_threshold
+    if config.solved_rule == "survive":
+        return bool(len(d) >= config.hold_steps)
     if config.solved_rule == "reach":
         return bool(np.any(d < thr))
     k = config.hold_steps

@@ -10,6 +10,7 @@ task                    where
 ``adaptation``          :mod:`pilco.tasks.adaptation`, damage in the middle of a run
 ``pendulum``            :mod:`pilco.tasks.pendulum`, the reference port's Pendulum-v1
 ``reacher_multi``       :mod:`pilco.tasks.reacher_multi`, one policy for any target
+``gym``                 :mod:`pilco.tasks.gym`, any gymnasium environment by its id
 ======================  =============================================================
 
 :data:`TASKS` is the registry of the package's tasks: ``python -m pilco.tasks``, the seed
@@ -41,6 +42,7 @@ TASKS = {
     "adaptation": "adaptation:ADAPTATION",
     "pendulum": "pendulum:PENDULUM",
     "reacher_multi": "reacher_multi:REACHER_MULTI",
+    "gym": "gym:GYM",
 }
 
 

@@ -1,0 +1,87 @@
+"""Any gymnasium environment with Box observations and actions, as the PILCO loop reads one.
+
+:class:`GymAdapter` wraps an environment so that its ``info`` carries ``"distance"``, the
+state's distance to a target in cost widths, ``sqrt(Σ_d ((x_d - t_d) / w_d)²)`` over the
+dimensions with a finite width (the saturating reward ``exp(-distance² / 2)`` is the
+task's), and holds each action for ``action_repeat`` of the environment's steps (their
+rewards summed; an episode that terminates or is truncated during them ends there). The
+state is the observation as float64. Bad settings (a non-Box space, a target or widths of
+the wrong length, a width that is not positive) raise before any episode.
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+__all__ = ["GymAdapter", "box_dimension"]
+
+
+def box_dimension(space: Any, what: str) -> int:
+    """The size of a one-dimensional Box ``space``; TypeError naming ``what`` otherwise."""
+    if not isinstance(space, spaces.Box) or len(space.shape) != 1:
+        raise TypeError(f"the environment's {what} space must be a one-dimensional Box, got "
+                        f"{space}")
+    return int(space.shape[0])
+
+
+class GymAdapter(gymnasium.Wrapper):
+    """``env`` with ``info["distance"]`` to ``target`` in units of ``widths`` and each
+    action held for ``action_repeat`` steps (module docstring).
+
+    Args:
+        env: a gymnasium environment with Box observation and action spaces.
+        target: the target state [D] (default zeros).
+        widths: the cost width of each state dimension [D], or one for all (``inf``: the
+            dimension is not in the cost).
+        action_repeat: environment steps per step of PILCO (the reference port's SUBS).
+    """
+
+    def __init__(self, env: gymnasium.Env, target: Sequence[float] = (),
+                 widths: Sequence[float] = (1.0,), action_repeat: int = 1) -> None:
+        super().__init__(env)
+        D = box_dimension(env.observation_space, "observation")
+        box_dimension(env.action_space, "action")
+        target = np.zeros(D) if len(target) == 0 else np.asarray(target, dtype=np.float64)
+        if target.shape != (D,) or not np.all(np.isfinite(target)):
+            raise ValueError(f"target must be {D} finite numbers (the state's dimensions), "
+                             f"got {list(np.ravel(target))}")
+        widths = np.asarray(widths, dtype=np.float64).reshape(-1)
+        if widths.size == 1:
+            widths = np.full(D, widths[0])
+        if widths.shape != (D,) or np.any(np.isnan(widths)) or np.any(widths <= 0):
+            raise ValueError(f"widths must be one positive number or {D} (inf: not in the "
+                             f"cost), got {list(widths)}")
+        if not np.any(np.isfinite(widths)):
+            raise ValueError("at least one width must be finite: the cost needs a dimension")
+        if isinstance(action_repeat, bool) or not isinstance(action_repeat, (int, np.integer)) \
+                or action_repeat < 1:
+            raise ValueError(f"action_repeat must be an integer >= 1, got {action_repeat!r}")
+        self.target, self.widths, self.action_repeat = target, widths, int(action_repeat)
+        self._in_cost = np.isfinite(widths)
+        self.observation_space = spaces.Box(-np.inf, np.inf, (D,), np.float64)
+
+    def distance(self, state) -> float:
+        """The state's distance to the target in cost widths."""
+        z = (np.asarray(state, dtype=np.float64) - self.target)[self._in_cost]
+        return float(np.sqrt(np.sum((z / self.widths[self._in_cost]) ** 2)))
+
+    def _out(self, obs, info: dict):
+        x = np.asarray(obs, dtype=np.float64).reshape(-1)
+        return x, {**info, "distance": self.distance(x)}
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        return self._out(obs, info)
+
+    def step(self, action):
+        total = 0.0
+        for _ in range(self.action_repeat):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            total += float(reward)
+            if terminated or truncated:
+                break
+        x, info = self._out(obs, info)
+        return x, total, bool(terminated), bool(truncated), info
