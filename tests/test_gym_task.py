@@ -67,3 +67,19 @@ def test_the_presets_name_known_settings():
     for name in PRESETS:
         args = GYM.read_settings(["--preset", name, "--output", "x"])
         assert args.planning_horizon == 40 and args.success == "survive"
+
+
+def test_a_gym_run_is_diagnosed_without_predicting_the_envs_end(tmp_path, capsys):
+    pytest.importorskip("mujoco")
+    import json
+
+    from pilco.diagnose import main
+
+    exp, _ = run(tmp_path, "--env", "InvertedPendulum-v5", "--horizon", "15")
+    out = tmp_path / "d.json"
+    assert main([exp.directory, "--restarts", "0", "--starts", "0", "--output", str(out),
+                 "--log-level", "WARNING"]) == 0
+    saved = json.loads(out.read_text())
+    # the model predicts states, not when the env ends an episode: survival is not predicted
+    assert saved["model"]["multi_step"]["pred_solved"] is None
+    assert "predicted to solve: not predicted" in capsys.readouterr().out

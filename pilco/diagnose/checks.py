@@ -185,7 +185,9 @@ def multi_step_check(exp, agent, episode: Episode, geometry: Optional[CostGeomet
         "real_final_distance": float(real_d[last]),
         "final_inside": bool(abs(real_d[last] - pm[last]) <= thresholds.z * ps[last]),
         "pred_min_distance": float(np.min(pm[1:])), "real_min_distance": float(np.min(real_d[1:n])),
-        "pred_solved": bool(solved),
+        # a prediction runs every step: whether the env would have ended the episode (a
+        # rule of surviving so many steps) is not something the model predicts
+        "pred_solved": None if exp.config.solved_rule == "survive" else bool(solved),
         "pred_cost_sum": float(np.sum(pred["cost"][1:n])),
         "real_cost_sum": float(np.sum(real_cost[1:n])),
     })

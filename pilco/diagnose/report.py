@@ -77,7 +77,7 @@ def _multi_step_lines(multi: Dict[str, Any], open_d, every: int) -> List[str]:
                  f"({'inside' if multi['final_inside'] else 'outside'} ±2 std); closest: "
                  f"predicted {multi['pred_min_distance']:.3f}, real "
                  f"{multi['real_min_distance']:.3f}; predicted to solve: "
-                 f"{'yes' if multi['pred_solved'] else 'no'}")
+                 f"{ {True: 'yes', False: 'no'}.get(multi['pred_solved'], 'not predicted')}")
     lines.append(f"  cost over the episode's steps: predicted {multi['pred_cost_sum']:.2f}, "
                  f"real {multi['real_cost_sum']:.2f} (real - predicted "
                  f"{multi['optimism']:.2f})")
