@@ -83,3 +83,9 @@ def test_a_gym_run_is_diagnosed_without_predicting_the_envs_end(tmp_path, capsys
     # the model predicts states, not when the env ends an episode: survival is not predicted
     assert saved["model"]["multi_step"]["pred_solved"] is None
     assert "predicted to solve: not predicted" in capsys.readouterr().out
+
+
+def test_the_gym_task_never_renders(tmp_path):
+    # an arbitrary env's renderer may need pygame, or MuJoCo beside TensorFlow: no frames
+    args = GYM.parse(["--env", "Pendulum-v1", "--output", str(tmp_path / "r")])
+    assert not args.no_render and GYM.config(args).render is False

@@ -12,6 +12,10 @@ policy is optimised from the mean of the episodes' start states with covariance
 ``--start-var`` times the identity, over ``--planning-horizon`` steps (default
 ``--horizon``).
 
+The run draws its figures but no frames of the environment (an arbitrary environment's
+renderer may need packages that are not installed, and MuJoCo's may not run in a process
+that loaded TensorFlow).
+
 Success (stated before a run, as ``--success``): ``survive``, the last episode lasted
 ``--success-steps`` steps (default ``--horizon``: for an environment that terminates when
 it fails, e.g. a pole that falls; an episode that ends early keeps its data), or
@@ -24,6 +28,7 @@ versions: ``inverted-pendulum``, the reference GPflow port's ``inverted_pendulum
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 from typing import Any, Dict, List, Optional
 
@@ -116,14 +121,13 @@ class GymTask(Task):
         self._adapter(s).close()
         return s
 
-    def _adapter(self, s: GymSettings, render: bool = False):
+    def _adapter(self, s: GymSettings):
         import gymnasium
 
         from ..envs.gym_adapter import GymAdapter, box_dimension
 
         try:
-            env = gymnasium.make(s.env, render_mode="rgb_array" if render else None,
-                                 **json.loads(s.env_kwargs))
+            env = gymnasium.make(s.env, **json.loads(s.env_kwargs))
         except (gymnasium.error.Error, TypeError, ImportError) as err:
             raise ValueError(f"--env {s.env}: cannot make the environment ({err})") from None
         try:
@@ -139,14 +143,18 @@ class GymTask(Task):
         return adapter
 
     def config(self, s: GymSettings) -> ExperimentConfig:
+        """The loop's config; never rendering: an arbitrary environment's renderer may
+        need packages that are not installed (pygame) or, for MuJoCo, may not run in a
+        process that loaded TensorFlow."""
         hold = s.success == "hold"
-        return self.loop_config(
+        config = self.loop_config(
             s, env_id=s.env, env_kwargs=json.loads(s.env_kwargs), random_action_scale=None,
             cost_width=1.0, success_threshold=s.success_distance if hold else 1.0,
             solved_rule=s.success, hold_steps=s.success_steps or s.horizon)
+        return dataclasses.replace(config, render=False)
 
     def make_env(self, s: GymSettings, config: ExperimentConfig):
-        return self._adapter(s, render=config.render)
+        return self._adapter(s)
 
     def agent_builder(self, s: GymSettings, env):
         """``(data, start_states) -> PILCO``: an RBF policy on the state (angles as sine
@@ -176,6 +184,17 @@ class GymTask(Task):
 
     def hooks(self, s: GymSettings, env) -> Dict[str, Any]:
         return dict(success_fn=solved_in_last_episode(self.config(s)))
+
+    def figures(self, exp, s: GymSettings) -> List[str]:
+        """Distances per step, predicted vs real cost, one- and multi-step predictions of
+        the first state dimensions (no frames: :meth:`config`)."""
+        from .. import plotting
+
+        D = exp.make_env().observation_space.shape[0]
+        return plotting.save_all(exp, exp.directory, title=s.env,
+                                 state_dims=tuple(range(min(D, 3))),
+                                 distance_label="distance to the target [cost widths]",
+                                 threshold=s.success_distance if s.success == "hold" else None)
 
     def notes(self, summary: Dict[str, Any]) -> List[str]:
         steps = [e["steps"] for e in summary["episodes"]]
