@@ -3,12 +3,12 @@
 numpy chooses some of its loops (``sin``, ``cos``, ``exp``, ...) by the CPU's instruction
 set when it is imported, and OpenBLAS (numpy's and scipy's) its kernels when it is loaded.
 On a CPU with AVX-512 both take paths whose results differ in the last bits from those of
-a CPU with AVX2 only, and a PILCO run turns last bits into another path: the same seed of
-the cart-pole, same code, ends its second episode 0.95 m from upright on one CPU and
-1.57 m on another. TensorFlow's float64 work runs the same code on every x86-64 CPU (its
-kernels are compiled for AVX2, and oneDNN takes no float64), so with numpy and OpenBLAS
-held to their AVX2 paths a seed gives the same run on every such CPU, Intel or AMD, with
-AVX-512 or without.
+a CPU with AVX2 only, and a PILCO run turns last bits into another path: the same seed
+and code learn differently on the two CPUs from the first learned episode on (measured in
+docs/success-rates.md, "The CPU, found and held still"). TensorFlow's float64 work runs
+the same code on every x86-64 CPU (its kernels are compiled for AVX2, and oneDNN takes no
+float64), so with numpy and OpenBLAS held to their AVX2 paths a seed gives the same run
+on x86-64 CPUs with AVX2, with AVX-512 or without.
 
 :func:`use_portable_arithmetic` holds them there by the two variables they read when
 they are loaded: ``NPY_DISABLE_CPU_FEATURES`` (numpy's AVX-512 loops off) and
