@@ -45,6 +45,8 @@ PORTABLE_ENVIRONMENT = {
 
 #: the CPU features OpenBLAS's Haswell kernels need
 _NEEDED = {"avx2", "fma"}
+#: the names ``platform.machine()`` gives an x86-64 CPU
+_X86_64 = ("x86_64", "amd64")
 
 
 def cpu_flags(cpuinfo: str = "/proc/cpuinfo") -> Set[str]:
@@ -72,7 +74,7 @@ def portable_environment(environ: Optional[Dict[str, str]] = None,
         return {}
     machine = machine if machine is not None else (
         platform.machine() if sys.platform.startswith("linux") else "")
-    if machine.lower() not in ("x86_64", "amd64"):
+    if machine.lower() not in _X86_64:
         return {}
     if not _NEEDED <= (cpu_flags() if flags is None else flags):
         return {}
@@ -111,7 +113,7 @@ def arithmetic_state() -> Dict[str, Any]:
                        if info.get("user_api") == "blas"})
     except Exception:  # threadpoolctl missing or failing: the kernels are not known
         blas = []
-    x86 = platform.machine().lower() in ("x86_64", "amd64")
+    x86 = platform.machine().lower() in _X86_64
     portable = (not avx512 and all(b.lower() == "haswell" for b in blas)) if x86 else None
     return {"portable": portable, "numpy_avx512": avx512, "blas": blas,
             "numpy": numpy.__version__}

@@ -16,7 +16,8 @@ from typing import Callable, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["CostGeometry", "quadratic_geometry", "tip_geometry", "weighted_geometry"]
+__all__ = ["CostGeometry", "geometry_of", "quadratic_geometry", "tip_geometry",
+           "weighted_geometry"]
 
 
 @dataclasses.dataclass
@@ -39,6 +40,13 @@ class CostGeometry:
     def distance(self, X) -> np.ndarray:
         """Task distance of states [N, D] -> [N]."""
         return np.linalg.norm(self.offset(X), axis=1)
+
+
+def geometry_of(reward) -> Optional[CostGeometry]:
+    """What the reward's own ``cost_geometry()`` says (the rewards of :mod:`pilco.rewards`
+    and any reward of the user's that offers the method); None without it."""
+    own = getattr(reward, "cost_geometry", None)
+    return own() if callable(own) else None
 
 
 def quadratic_geometry(W, t) -> CostGeometry:

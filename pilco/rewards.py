@@ -20,7 +20,8 @@ from gpflow.config import default_float
 from .angles import trig_moments
 from .moments import compiled, eye_like
 from .protocols import Reward
-from .reward_geometry import CostGeometry, quadratic_geometry, tip_geometry, weighted_geometry
+from .reward_geometry import (CostGeometry, geometry_of, quadratic_geometry, tip_geometry,
+                              weighted_geometry)
 from .validation import (
     check_entries,
     check_gaussian,
@@ -211,9 +212,8 @@ class CombinedRewards(_Reward):
     def cost_geometry(self) -> Optional[CostGeometry]:
         """The widest positively weighted part's geometry
         (:func:`pilco.reward_geometry.weighted_geometry`); None when such a part has none."""
-        parts = [r.cost_geometry() if callable(getattr(r, "cost_geometry", None)) else None
-                 for r in self.base_rewards]
-        return weighted_geometry(self.coefs.numpy(), parts)
+        return weighted_geometry(self.coefs.numpy(),
+                                 [geometry_of(r) for r in self.base_rewards])
 
 
 class CartPoleReward(_Reward):

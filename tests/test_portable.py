@@ -81,9 +81,11 @@ def test_a_replay_that_parts_says_how_to_run_the_runs_own_arithmetic(tmp_path, m
     from types import SimpleNamespace
 
     from pilco.diagnose.replay import _arithmetic_hint
+    from pilco.experiment.store import RunStore
 
+    run = SimpleNamespace(store=RunStore(str(tmp_path)))
     summary = tmp_path / "summary.json"
-    run = SimpleNamespace(store=SimpleNamespace(summary_path=str(summary)))
+    assert run.store.summary_path == str(summary)
     monkeypatch.setattr(portable, "arithmetic_state", lambda: {"portable": True})
     summary.write_text(json.dumps({"provenance": {"cpu": "x"}}))  # before it was recorded
     assert "PILCO_PORTABLE_ARITHMETIC=0" in _arithmetic_hint(run)

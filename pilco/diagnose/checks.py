@@ -220,15 +220,19 @@ def _on_system(view, number: int, env, seed: int) -> Episode:
                    distance_fn=view.distance_fn, quiet=True, reset_options=options)
 
 
+def _max_cost(agent, geometry: Optional[CostGeometry]) -> float:
+    """The horizon's largest predicted cost: its steps times the reward at the target."""
+    return agent.horizon * (geometry.max_reward if geometry is not None else 1.0)
+
+
 def _candidate(view, number: int, geometry: Optional[CostGeometry], kind: str,
                seed: Optional[int], env, seconds: float = 0.0,
                task: Optional[int] = None) -> Dict[str, Any]:
     """Predicted cost (the policy objective) and, with ``env``, the real outcome of the
     agent's current policy."""
     agent, cfg = view.agent, view.config
-    max_reward = geometry.max_reward if geometry is not None else 1.0
     out: Dict[str, Any] = {"start": kind, "seed": seed, "seconds": seconds,
-                           "pred_cost": agent.horizon * max_reward - agent.expected_return()}
+                           "pred_cost": _max_cost(agent, geometry) - agent.expected_return()}
     if geometry is not None:
         pred = predicted_run(agent, cfg.horizon, geometry, task)
         out["pred_final_distance"] = float(pred["distance_mean"][-1])
@@ -286,9 +290,8 @@ def optimiser_check(view, number: int, geometry: Optional[CostGeometry], restart
     better = [c for c in others if run_cost - c["pred_cost"] >= needed]
     solves = (any(c["real_solved"] for c in better)
               if better and all("real_solved" in c for c in better) else None)
-    max_reward = geometry.max_reward if geometry is not None else 1.0
     return {"iterations": iters, "method": cfg.policy_optimizer, "horizon": agent.horizon,
-            "max_cost": agent.horizon * max_reward,
+            "max_cost": _max_cost(agent, geometry),
             "candidates": candidates, "run_pred_cost": run_cost,
             "best": others.index(best) + 1 if best else None,
             "best_pred_cost": best["pred_cost"] if best else None, "gain": gain,

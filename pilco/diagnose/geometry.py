@@ -4,11 +4,11 @@ gripper's or the pendulum tip's to the target) for states and for the state Gaus
 multi-step prediction, and how steep the cost is at a given distance."""
 from __future__ import annotations
 
-from typing import Optional, Tuple
+from typing import Tuple
 
 import numpy as np
 
-from ..reward_geometry import CostGeometry
+from ..reward_geometry import CostGeometry, geometry_of
 
 __all__ = ["slope_ratio", "CostGeometry", "cost_geometry", "distance_moments"]
 
@@ -19,12 +19,9 @@ def slope_ratio(widths: float) -> float:
     return r * float(np.exp((1.0 - r * r) / 2.0))
 
 
-def cost_geometry(reward) -> Optional[CostGeometry]:
-    """What the reward's own ``cost_geometry()`` says (the rewards of :mod:`pilco.rewards`
-    and any reward of the user's that offers the method, :mod:`pilco.reward_geometry`);
-    None without it (the diagnosis then skips its distance and cost checks)."""
-    own = getattr(reward, "cost_geometry", None)
-    return own() if callable(own) else None
+#: the reward's own geometry (:func:`pilco.reward_geometry.geometry_of`); None without one
+#: (the diagnosis then skips its distance and cost checks)
+cost_geometry = geometry_of
 
 
 def distance_moments(geometry: CostGeometry, M: np.ndarray, S: np.ndarray,

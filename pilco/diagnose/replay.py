@@ -113,13 +113,10 @@ def agent_of_episode(exp, episode: int, replay: bool = False, tolerance: float =
 def _arithmetic_hint(exp) -> str:
     """When the run did not record the portable arithmetic (:mod:`pilco.portable`) and this
     process runs it, how to replay with the run's own."""
-    import json
-
     from ..portable import SWITCH, arithmetic_state
 
     try:
-        with open(exp.store.summary_path, encoding="utf-8") as fh:
-            ran = json.load(fh).get("provenance", {}).get("arithmetic") or {}
+        ran = exp.store.load_summary().get("provenance", {}).get("arithmetic") or {}
     except (OSError, ValueError, AttributeError):
         return ""
     if ran.get("portable") is True or arithmetic_state()["portable"] is not True:

@@ -7,7 +7,7 @@ import dataclasses
 from typing import Any, Dict, Mapping, Optional
 
 from .settings import (check_declared, non_negative_float, non_negative_int, positive_int,
-                       setting, task_settings)
+                       setting, task_settings, whole)
 
 __all__ = ["LoopSettings", "ExperimentConfig"]
 
@@ -209,14 +209,10 @@ class LoopSettings:
         _check_loop(self)
 
 
-def _whole(value, minimum: int) -> bool:
-    return not isinstance(value, bool) and isinstance(value, int) and value >= minimum
-
-
 def _check_loop(s: LoopSettings) -> None:
     # each setting against its declaration (choices, whole-number and number ranges),
     # then what a declaration cannot say: the relations between settings
-    if _whole(s.random_episodes, 0) and s.random_episodes < 1:
+    if whole(s.random_episodes, 0) and s.random_episodes < 1:
         raise ValueError("at least one random episode is needed to build the model")
     check_declared(s)
     if s.episodes is not None and s.episodes < s.random_episodes:
@@ -280,7 +276,7 @@ class ExperimentConfig(LoopSettings):
         if self.episodes is None:
             raise ValueError("episodes must be a whole number >= 1, got None")
         for name in ("model_patience", "hold_steps"):
-            if not _whole(getattr(self, name), 1):
+            if not whole(getattr(self, name), 1):
                 raise ValueError(f"{name} must be a whole number >= 1, got "
                                  f"{getattr(self, name)!r}")
         if self.solved_rule not in ("reach", "hold", "survive"):

@@ -16,7 +16,7 @@ import dataclasses
 import math
 from typing import Any, Callable, Dict, Optional, Sequence
 
-__all__ = ["setting", "task_settings", "field_meta", "check_declared", "positive_float",
+__all__ = ["setting", "task_settings", "field_meta", "check_declared", "whole", "positive_float",
            "non_negative_float", "positive_int", "non_negative_int", "optional_float", "level_name"]
 
 #: the metadata keys of a :func:`setting` field
@@ -109,6 +109,11 @@ def field_meta(field: dataclasses.Field) -> Dict[str, Any]:
     return field.metadata.get(_META, {})
 
 
+def whole(value: Any, minimum: int) -> bool:
+    """``value`` is an integer (not a bool) of at least ``minimum``."""
+    return not isinstance(value, bool) and isinstance(value, int) and value >= minimum
+
+
 #: the least value of each whole-number and number kind
 _WHOLE = {positive_int: 1, non_negative_int: 0}
 _NUMBER = {positive_float: (lambda v: v > 0, "a number > 0"),
@@ -141,8 +146,7 @@ def check_declared(settings: Any) -> None:
             if choices is not None and v not in choices:
                 raise ValueError(f"{name} must be {' or '.join(map(repr, choices))}, got "
                                  f"{value!r}")
-            if kind in _WHOLE and not (not isinstance(v, bool) and isinstance(v, int)
-                                       and v >= _WHOLE[kind]):
+            if kind in _WHOLE and not whole(v, _WHOLE[kind]):
                 raise ValueError(f"{name} must be a whole number >= {_WHOLE[kind]}"
                                  f"{or_none}, got {value!r}")
             if kind in _NUMBER:

@@ -105,6 +105,11 @@ class RunStore:
         with open(self.progress_path, encoding="utf-8") as f:
             return json.load(f)
 
+    def load_summary(self) -> Dict[str, Any]:
+        """The contents of ``summary.json`` (``FileNotFoundError`` when there is none)."""
+        with open(self.summary_path, encoding="utf-8") as f:
+            return json.load(f)
+
     def load_episodes(self, records: Sequence[Dict[str, Any]]
                       ) -> Tuple[List[Episode], List[Dict[str, np.ndarray]]]:
         """The episodes counted in ``records`` (from ``progress.json``) and their

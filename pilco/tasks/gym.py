@@ -124,7 +124,7 @@ class GymTask(Task):
     def _adapter(self, s: GymSettings):
         import gymnasium
 
-        from ..envs.gym_adapter import GymAdapter, box_dimension
+        from ..envs.gym_adapter import GymAdapter
 
         try:
             env = gymnasium.make(s.env, **json.loads(s.env_kwargs))
@@ -135,7 +135,7 @@ class GymTask(Task):
         except (TypeError, ValueError) as err:
             env.close()
             raise ValueError(f"--env {s.env}: {err}") from None
-        D = box_dimension(env.observation_space, "observation")
+        D = adapter.observation_space.shape[0]
         bad = [i for i in s.angles or () if not 0 <= i < D]
         if bad:
             adapter.close()
