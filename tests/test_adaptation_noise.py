@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from pilco.controllers import LinearController
-from pilco.experiment import Experiment, ExperimentConfig, stack_transitions
+from pilco.experiment import Experiment, ExperimentConfig, RunHooks, stack_transitions
 from pilco.models import PILCO
 from pilco.rewards import ExponentialReward
 from pilco.tasks import adaptation, adaptation_model
@@ -59,6 +59,31 @@ def build(data, start_states):
                  horizon=3, m_init=start_states[:1])
 
 
+class PlaneHooks(RunHooks):
+    """The plane's run: :class:`PlaneEnv`, the agents of ``builder`` (default
+    :func:`build`), the adaptation's choice of the model's transitions."""
+
+    def __init__(self, builder=build):
+        self.builder = builder
+
+    def make_env(self, run):
+        return PlaneEnv()
+
+    def build_agent(self, data, start_states):
+        return self.builder(data, start_states)
+
+    def model_data(self, run):
+        return adaptation_model.damaged_arm_data(run)
+
+
+class PlaneAdaptation(adaptation.AdaptationSchedule, PlaneHooks):
+    """The adaptation's schedule on the plane, with its settings ``settings``."""
+
+    def __init__(self, settings):
+        super().__init__()
+        self.settings = settings
+
+
 def args(**kw):
     base = dict(changed_output_noise=1e6, changed_output_threshold=10.0, old_data_noise=100.0)
     base.update(kw)
@@ -72,8 +97,7 @@ def damaged_run(tmp_path):
     cfg = ExperimentConfig(task="plane", env_id="unused", seed=1, episodes=4,
                            random_episodes=2, horizon=25, random_action_scale=0.3,
                            predictions=False, quiet=True, render=False)
-    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
-                     model_data=adaptation_model.damaged_arm_data)
+    exp = Experiment(cfg, str(tmp_path / "run"), PlaneHooks())
     PlaneEnv.broken = False
     try:
         exp.run_random_episode()
@@ -137,8 +161,7 @@ def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
         agents.append(build(data, start_states))
         return agents[-1]
 
-    resumed = Experiment.resume(exp.directory, exp.config, rebuild, make_env=PlaneEnv,
-                                model_data=adaptation_model.damaged_arm_data)
+    resumed = Experiment.resume(exp.directory, exp.config, PlaneHooks(rebuild))
     assert resumed.task_state["older_noise_scale"] == [1e6, 100.0]
     np.testing.assert_array_equal(resumed.agent.mgpr.noise_scales,
                                   exp.agent.mgpr.noise_scales)
@@ -149,7 +172,7 @@ def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
 @pytest.mark.parametrize("episode, restarts, stop", [(3, 1, False), (4, 2, False),
                                                      (4, 1, True)])
 def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restarts, stop):
-    """``adaptation.run`` on the plane: a random and a healthy episode, the damage (the
+    """The adaptation's schedule on the plane: a random and a healthy episode, the damage (the
     broken plane starts elsewhere: the agent's ``m_init`` changes), two damaged episodes
     (with ``--damaged-policy-restarts 2`` the second one's policy search restarts; with
     ``--stop-stuck-joints`` the second one no longer commands the stuck coordinate).
@@ -168,13 +191,10 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
         old_data_noise=100.0, damaged_policy_restarts=restarts, changed_output_noise=None,
         changed_output_threshold=10.0, stop_stuck_joints=stop, stuck_joint_ratio=0.1,
         replan_stuck_joints=False)  # a re-planned episode is not replayed (its docstring)
-    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
-                     model_data=adaptation_model.damaged_arm_data,
-                     before_replayed_episode=adaptation.replay_damage(run_args))
-    exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None}
+    exp = Experiment(cfg, str(tmp_path / "run"), PlaneAdaptation(run_args))
     PlaneEnv.broken = False
     try:
-        summary = adaptation.run(exp, run_args)
+        summary = exp.run()
     finally:
         PlaneEnv.broken = False
     assert summary["damage_at_episode"] == 3 and len(exp.episodes) == 4
@@ -189,7 +209,7 @@ def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restar
     np.testing.assert_array_equal(view.agent.m_init, [[0.3, -0.2]])
     assert view.config.policy_restarts_at(episode, False) == (restarts if episode == 4 else 1)
     assert action_error(view.agent, exp.episodes[episode - 1]) < 1e-9
-    exp.before_replayed_episode = None  # without the hook: the healthy start, another policy
+    exp.hooks = PlaneHooks()  # without the adaptation's replay: the healthy start, another policy
     view = replay_learning(exp, episode)
     np.testing.assert_array_equal(view.agent.m_init, [[0.0, 0.0]])
     assert action_error(view.agent, exp.episodes[episode - 1]) > 1e-6
@@ -280,12 +300,11 @@ def test_a_resumed_run_keeps_the_stuck_joint_stopped(damaged_run):
     exp = damaged_run
     adaptation_model.stop_stuck_joints(exp, stuck_args(), first=3)
     exp.save()
-    resumed = Experiment.resume(exp.directory, exp.config, build, make_env=PlaneEnv,
-                                model_data=adaptation_model.damaged_arm_data)
+    resumed = Experiment.resume(exp.directory, exp.config, PlaneHooks())
     assert (resumed.task_state["inert_actions"], resumed.task_state["inert_from_episode"]) == (
         [0], 3)
     np.testing.assert_array_equal(resumed.training_data()[0], exp.training_data()[0])
-    adaptation_model.stop_stuck_joints(resumed, stuck_args(), first=3)  # as adaptation.run does
+    adaptation_model.stop_stuck_joints(resumed, stuck_args(), first=3)  # as the schedule does
     np.testing.assert_array_equal(resumed.agent.controller.max_action, [0.0, 1.0])
     np.testing.assert_array_equal(resumed.agent.data[0], exp.agent.data[0])
 
@@ -348,8 +367,7 @@ def _healthy_run(tmp_path):
     cfg = ExperimentConfig(task="plane", env_id="unused", seed=1, episodes=4,
                            random_episodes=2, horizon=12, random_action_scale=0.3,
                            predictions=False, quiet=True, render=False, policy_iters=5)
-    exp = Experiment(cfg, str(tmp_path / "run"), build, make_env=PlaneEnv,
-                     model_data=adaptation_model.damaged_arm_data)
+    exp = Experiment(cfg, str(tmp_path / "run"), PlaneHooks())
     PlaneEnv.broken = False
     exp.run_random_episode()
     exp.run_random_episode()
@@ -416,14 +434,20 @@ def test_the_first_damaged_episode_replans_once_a_joint_is_stuck(tmp_path, monke
 
 
 def test_the_adaptation_watches_only_its_first_damaged_episode():
-    run = argparse.Namespace(summary_fields={}, episodes=[1, 2], make_env=PlaneEnv)
+    run = argparse.Namespace(summary_fields={"damage_at_episode": None}, episodes=[1, 2],
+                             make_env=PlaneEnv)
+
+    def policy(x):
+        return x
+
     on = ADAPTATION.parse(["--output", "x"])
     assert on.replan_stuck_joints and on.stuck_check_steps == 3
-    watch = adaptation._watch(run, on, first=3)
-    assert isinstance(watch, adaptation_model.ReplanWhenStuck) and watch.number == 3
-    assert adaptation._watch(run, ADAPTATION.parse(["--no-replan-stuck-joints", "--output",
-                                                    "x"]), first=3) is None
-    assert adaptation._watch(run, ADAPTATION.parse(["--no-stop-stuck-joints", "--output",
-                                                    "x"]), first=3) is None
+    hooks = PlaneAdaptation(on)
+    assert hooks.watch(run, 3, policy) is policy  # healthy: not damaged yet
+    run.summary_fields["damage_at_episode"] = 3
+    assert hooks.watch(run, 3, policy) is not policy  # the first damaged episode
+    for off in ("--no-replan-stuck-joints", "--no-stop-stuck-joints"):
+        other = PlaneAdaptation(ADAPTATION.parse([off, "--output", "x"]))
+        assert other.watch(run, 3, policy) is policy
     run.summary_fields["stuck_joints"] = []  # judged after the first damaged episode
-    assert adaptation._watch(run, on, first=3) is None
+    assert hooks.watch(run, 4, policy) is policy

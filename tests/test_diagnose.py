@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from pilco.controllers import RbfController
-from pilco.experiment import Experiment, ExperimentConfig, saturating_cost
+from pilco.experiment import Experiment, ExperimentConfig, FunctionHooks, saturating_cost
 from pilco.diagnose import (VERDICTS, Thresholds, action_error, agent_of_episode, diagnose,
                             format_report, verdict, write_diagnosis)
 from pilco.diagnose.checks import mean_dynamics
@@ -62,13 +62,13 @@ def config():
 def run_dir(tmp_path_factory):
     """A finished 3-episode run (1 random, 2 learned), reopened as a user would."""
     directory = str(tmp_path_factory.mktemp("diagnose") / "run")
-    exp = Experiment(config(), directory, build, make_env=Line)
+    exp = Experiment(config(), directory, FunctionHooks(build, Line))
     exp.run()
     return directory
 
 
 def reopen(directory):
-    return Experiment.resume(directory, config(), build, make_env=Line)
+    return Experiment.resume(directory, config(), FunctionHooks(build, Line))
 
 
 def test_diagnose_a_run_directory_writes_every_field(run_dir):

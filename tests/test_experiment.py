@@ -13,7 +13,8 @@ import gymnasium
 import numpy as np
 import pytest
 
-from pilco.experiment import Experiment, ExperimentConfig, RunStore, rollout, stack_transitions
+from pilco.experiment import (Experiment, ExperimentConfig, RunHooks, RunStore, rollout,
+                              stack_transitions)
 from pilco.experiment import signals as run_signals
 
 
@@ -86,9 +87,27 @@ def config(**kw):
     return ExperimentConfig(**base)
 
 
+class LineHooks(RunHooks):
+    """The line task's hooks: :class:`LineEnv`, the agent builder ``build`` and the hooks
+    given as functions in ``methods`` (each with the method's arguments after ``self``)."""
+
+    def __init__(self, build, **methods):
+        self._build = build
+        for name, function in methods.items():
+            assert callable(getattr(RunHooks, name)), name
+            setattr(self, name, function)
+
+    def make_env(self, run):
+        return LineEnv()
+
+    def build_agent(self, data, start_states):
+        return self._build(data, start_states)
+
+
 def experiment(tmp_path, cfg=None, agents=None, agent_kw=None, agent_class=None, **kw):
     """An experiment on the line task whose agents (``agent_class``, by default
-    :class:`StandInAgent`) are appended to ``agents`` as it builds them."""
+    :class:`StandInAgent`) are appended to ``agents`` as it builds them; ``kw``: hooks as
+    functions (:class:`LineHooks`)."""
     agents = [] if agents is None else agents
     agent_class = agent_class or StandInAgent
 
@@ -98,7 +117,7 @@ def experiment(tmp_path, cfg=None, agents=None, agent_kw=None, agent_class=None,
         return agents[-1]
 
     cfg_ = cfg or config()
-    return Experiment(cfg_, str(tmp_path / "run"), build, make_env=LineEnv, **kw), agents
+    return Experiment(cfg_, str(tmp_path / "run"), LineHooks(build, **kw)), agents
 
 
 def test_a_run_collects_saves_and_summarises_every_episode(tmp_path):
@@ -149,8 +168,8 @@ def test_a_tasks_choice_of_model_data_and_its_state_survive_a_resume(tmp_path):
         return X, Y, np.full(len(X), 3.0)
 
     exp, agents = experiment(tmp_path, config(episodes=4, max_data=5),
-                             success_fn=lambda s: len(s["episodes"]) == 4)
-    exp.model_data = later_half
+                             success=lambda s: len(s["episodes"]) == 4,
+                             model_data=later_half)
     exp.run_random_episode()
     exp.run_learned_episode()
     exp.task_state["from"] = 2
@@ -162,7 +181,8 @@ def test_a_tasks_choice_of_model_data_and_its_state_survive_a_resume(tmp_path):
     assert exp.summary()["success"] is False
     base, rebuilt = experiment(tmp_path)
     resumed = Experiment.resume(exp.directory, config(episodes=4, max_data=5),
-                                base.build_agent, make_env=LineEnv, model_data=later_half)
+                                LineHooks(base.hooks.build_agent, model_data=later_half,
+                                          success=lambda s: len(s["episodes"]) == 4))
     assert resumed.task_state == {"from": 2}
     np.testing.assert_array_equal(rebuilt[0].noise_scales, np.full(5, 3.0))
     resumed.run_learned_episode()
@@ -197,8 +217,7 @@ def test_ctrl_c_in_a_rollout_keeps_its_transitions_and_the_run_resumes(tmp_path)
     agent.compute_action = original
 
     resumed, new_agents = experiment(tmp_path)
-    resumed = Experiment.resume(exp.directory, config(), resumed.build_agent,
-                                make_env=LineEnv)
+    resumed = Experiment.resume(exp.directory, config(), resumed.hooks)
     assert len(resumed.episodes) == 1 and resumed.agent is new_agents[0]
     np.testing.assert_array_equal(resumed.episodes[0].states, exp.episodes[0].states)
     final = resumed.run()
@@ -227,7 +246,7 @@ def test_resume_reads_progress_written_before_the_typed_fields(tmp_path):
     progress["extra"] = {"train_from_episode": 2, "summary": {"damage_at_episode": 2}}
     open(exp.store.progress_path, "w").write(json.dumps(progress))
     base, _ = experiment(tmp_path)
-    resumed = Experiment.resume(exp.directory, config(), base.build_agent, make_env=LineEnv)
+    resumed = Experiment.resume(exp.directory, config(), base.hooks)
     assert resumed.task_state == {"train_from_episode": 2, "older_noise_scale": 4.0}
     assert resumed.summary()["damage_at_episode"] == 2
 
@@ -390,9 +409,9 @@ def test_policy_searches_can_start_fresh_until_an_episode_is_solved(tmp_path):
 def test_the_policy_search_hook_runs_before_each_policy_search(tmp_path):
     seen = []
 
-    def hook(agent, number):
+    def hook(run, number):
         # the model of this episode is trained, its policy not yet optimised
-        seen.append((number, [c[0] for c in agent.calls].count("policy")))
+        seen.append((number, [c[0] for c in run.agent.calls].count("policy")))
 
     exp, agents = experiment(tmp_path, before_policy_search=hook)
     exp.run()
@@ -558,14 +577,17 @@ def test_start_points_and_wide_start_are_switched_on_once_solved(tmp_path, when)
 
 
 def test_a_watch_sees_the_states_and_its_pause_counts_as_policy_time(tmp_path):
-    """``run_learned_episode(watch=...)``: the watch wraps the agent's policy for that
-    episode only, sees every state as it comes, and the seconds it notes as a pause move
-    from interaction to policy time."""
+    """The hooks' ``watch`` wraps the agent's policy for the episodes it chooses (here
+    episode 2 only), sees every state as it comes, and the seconds it notes as a pause
+    move from interaction to policy time."""
     import time
 
     seen = []
 
-    def watch(policy):
+    def watch(run, number, policy):
+        if number != 2:
+            return policy
+
         def watched(x):
             seen.append(np.array(x))
             if len(seen) == 2:
@@ -575,9 +597,9 @@ def test_a_watch_sees_the_states_and_its_pause_counts_as_policy_time(tmp_path):
 
         return watched
 
-    exp, agents = experiment(tmp_path)
+    exp, agents = experiment(tmp_path, watch=watch)
     exp.run_random_episode()
-    exp.run_learned_episode(watch=watch)
+    exp.run_learned_episode()
     episode = exp.episodes[-1]
     np.testing.assert_array_equal(np.array(seen), episode.states[:-1])
     assert exp.records[-1]["seconds"]["interaction"] == pytest.approx(episode.seconds - 0.2)
@@ -668,3 +690,33 @@ def test_a_solved_run_repeats_its_policy_even_when_the_model_knows_its_outcome(t
     record = exp.run_learned_episode()
     assert agent.policy_restarts == [2, 2] and agent.used == [1]
     assert "left_repeat" not in record
+
+
+def test_the_loop_follows_the_hooks_schedule(tmp_path):
+    """The episodes run while ``before_episode`` says so (here 3 of the config's 4), each
+    followed by ``after_episode``, then ``finished`` once; ``opened`` comes first, and a
+    run read back opens again and finishes without another episode."""
+    calls = []
+
+    def before(run, number):
+        calls.append(("before", number, len(run.episodes)))
+        return number <= 3
+
+    exp, _ = experiment(tmp_path, opened=lambda run: calls.append(("opened",)),
+                        before_episode=before,
+                        after_episode=lambda run, n: calls.append(("after", n)),
+                        finished=lambda run: calls.append(("finished", len(run.episodes))))
+    summary = exp.run()
+    assert calls == [("opened",), ("before", 1, 0), ("after", 1), ("before", 2, 1),
+                     ("after", 2), ("before", 3, 2), ("after", 3), ("before", 4, 3),
+                     ("finished", 3)]
+    assert summary["complete"] and len(summary["episodes"]) == 3
+    calls.clear()
+    base, _ = experiment(tmp_path / "other")
+    resumed = Experiment.resume(exp.directory, config(), LineHooks(
+        base.hooks.build_agent, opened=lambda run: calls.append(("opened",)),
+        before_episode=before, finished=lambda run: calls.append(("finished", 3))))
+    assert resumed.run()["complete"] and len(resumed.episodes) == 3
+    assert calls == [("opened",), ("before", 4, 3), ("finished", 3)]
+    with pytest.raises(TypeError, match="hooks must be a pilco.experiment.RunHooks"):
+        Experiment(config(), str(tmp_path / "bad"), base.hooks.build_agent)

@@ -16,7 +16,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from pilco.experiment import EnvironmentContractError, Experiment, ExperimentConfig
+from pilco.experiment import (EnvironmentContractError, Experiment, ExperimentConfig,
+                              FunctionHooks)
 from pilco.models import PILCO
 from pilco.tasks import get_task
 
@@ -145,10 +146,10 @@ class NoDistance(gym.Env):
 def test_an_env_without_the_distance_is_refused_before_its_first_step(tmp_path):
     env = NoDistance()
     cfg = ExperimentConfig(task="line", env_id="unused", seed=0, episodes=2, horizon=4)
-    exp = Experiment(cfg, str(tmp_path / "run"), lambda data, starts: None,
-                     make_env=lambda: env)
+    exp = Experiment(cfg, str(tmp_path / "run"), FunctionHooks(lambda data, starts: None,
+                                                               lambda: env))
     with pytest.raises(EnvironmentContractError,
                        match=r"reports no task distance.*holds none of 'distance', "
-                             r"'tip_distance' \(it holds \['note'\]\).*distance_fn"):
+                             r"'tip_distance' \(it holds \['note'\]\).*distance\(env, info\)"):
         exp.run()
     assert env.steps == 0

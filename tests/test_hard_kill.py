@@ -28,9 +28,9 @@ import numpy as np
 import pytest
 
 from pilco import files
-from pilco.experiment import Experiment
+from pilco.experiment import Experiment, FunctionHooks, RunHooks
 from pilco.files import write_npz_atomic
-from pilco.tasks import adaptation, adaptation_model
+from pilco.tasks import adaptation
 
 from test_experiment import LineEnv, StandInAgent, config
 
@@ -101,12 +101,33 @@ class BreakableLineEnv(LineEnv):
         return super().step(self.effect * np.asarray(action))
 
 
+class LineHooks(RunHooks):
+    """The hooks of a :class:`LineTask`'s runs: its env, its agents."""
+
+    def __init__(self, task):
+        self.task = task
+
+    def make_env(self, run):
+        return self.task.env()
+
+    def build_agent(self, data, start_states):
+        return self.task.build(data, start_states)
+
+
+class LineAdaptation(adaptation.AdaptationSchedule, LineHooks):
+    """The adaptation's schedule on the line, with its task's ``args`` as settings."""
+
+    def __init__(self, task):
+        super().__init__(task)
+        self.settings = task.args
+
+
 class LineTask:
     """Three episodes (one random) of the line env, run by ``Experiment.run``."""
 
     env = LineEnv
     cfg = config(episodes=3)
-    model_data = None  # the task's choice of model data (Experiment's ``model_data``)
+    hooks = LineHooks  # the class of its runs' hooks
 
     def __init__(self, built):
         self.built = built  # every agent the runs built
@@ -116,21 +137,19 @@ class LineTask:
         return self.built[-1]
 
     def new(self, directory):
-        return Experiment(self.cfg, str(directory), self.build, make_env=self.env,
-                          model_data=self.model_data)
+        return Experiment(self.cfg, str(directory), self.hooks(self))
 
     def resume(self, directory):
-        return Experiment.resume(str(directory), self.cfg, self.build, make_env=self.env,
-                                 model_data=self.model_data)
+        return Experiment.resume(str(directory), self.cfg, self.hooks(self))
 
     def run(self, exp):
         return exp.run()
 
 
 class AdaptationTask(LineTask):
-    """``pilco.tasks.adaptation.run`` on the breakable line env: one random and one
-    learned healthy episode (it reaches), the damage, then up to three damaged episodes;
-    the second one reaches again."""
+    """The adaptation's schedule on the breakable line env: one random and one learned
+    healthy episode (it reaches), the damage, then up to three damaged episodes; the
+    second one reaches again."""
 
     env = BreakableLineEnv
     cfg = config(episodes=6)
@@ -141,22 +160,7 @@ class AdaptationTask(LineTask):
                               damaged_policy_restarts=1, changed_output_noise=None,
                               changed_output_threshold=10.0, stop_stuck_joints=False,
                               stuck_joint_ratio=0.1, replan_stuck_joints=False)
-    model_data = staticmethod(adaptation_model.damaged_arm_data)
-
-    def _fields(self, exp):  # as AdaptationTask.hooks and .prepare
-        exp.success_fn = adaptation.recovered_within(adaptation.RECOVER_WITHIN)
-        exp.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None,
-                              **exp.summary_fields}
-        return exp
-
-    def new(self, directory):
-        return self._fields(super().new(directory))
-
-    def resume(self, directory):
-        return self._fields(super().resume(directory))
-
-    def run(self, exp):
-        return adaptation.run(exp, self.args)
+    hooks = LineAdaptation
 
 
 def untimed(records):
@@ -349,7 +353,7 @@ def test_a_kill_with_the_real_agent_newer_than_progress(tmp_path, monkeypatch):
     finishes."""
     cfg = config(episodes=2, model_iters=5, policy_iters=2)
     directory = tmp_path / "run"
-    exp = Experiment(cfg, str(directory), line_pilco, make_env=LineEnv)
+    exp = Experiment(cfg, str(directory), FunctionHooks(line_pilco, LineEnv))
     # writes: progress and summary (0 episodes), then per episode data, agent, progress,
     # summary: write 8 is episode 2's progress
     killer = KillAtWrite(8, episodes=lambda: len(exp.episodes))
@@ -363,9 +367,8 @@ def test_a_kill_with_the_real_agent_newer_than_progress(tmp_path, monkeypatch):
     assert on_disk(directory) == (1, 2)
 
     rebuilt = []
-    resumed = Experiment.resume(str(directory), cfg,
-                                lambda *a: rebuilt.append(1) or line_pilco(*a),
-                                make_env=LineEnv)
+    resumed = Experiment.resume(str(directory), cfg, FunctionHooks(
+        lambda *a: rebuilt.append(1) or line_pilco(*a), LineEnv))
     assert not rebuilt and len(resumed.episodes) == 1
     assert resumed.agent.data[0].shape[0] == resumed.episodes[0].steps < saved_rows
     summary = resumed.run()

@@ -39,7 +39,7 @@ def test_the_state_holds_the_target_and_each_episode_runs_on_its_training_target
     with pytest.raises(TypeError, match="Fetch reacher"):
         TargetInState(make_env("pilco/CartPoleSwingUp-v0", {}))
     s = REACHER_MULTI.parse(["--training-targets", "3"])
-    options = REACHER_MULTI.hooks(s, env)["reset_options"]
+    options = REACHER_MULTI.hooks(s, REACHER_MULTI.config(s), env).reset_options
     train = REACHER_MULTI.targets(s, TRAIN_STREAM, 3)
     for number, k in ((1, 0), (2, 1), (3, 2), (4, 0), (12, 2)):
         np.testing.assert_array_equal(options(number)["target"], train[k])

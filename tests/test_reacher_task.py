@@ -228,12 +228,14 @@ def test_the_adaptation_has_the_reachers_costs(tmp_path):
 
 
 class _HealthyRun:
-    """The part of an Experiment that the adaptation's healthy phase uses; learned
-    episode k (1-based) reaches the target when k is in ``reaching``."""
+    """The part of an Experiment that the adaptation's schedule reads while the arm is
+    healthy; learned episode k (1-based) reaches the target when k is in ``reaching``."""
 
     def __init__(self, reaching, done=0):
         self.reaching = set(reaching)
         self.records, self.episodes = [{"random": True}], ["random"]
+        self.summary_fields = {"damage_at_episode": None, "episodes_to_recover": None}
+        self.task_state = {}
         for _ in range(done):
             self.run_learned_episode()
 
@@ -243,6 +245,12 @@ class _HealthyRun:
 
     def episode_solved(self, episode):
         return episode != "random" and episode in self.reaching
+
+    def solved_at_episode(self):
+        return None
+
+    def save_progress(self):
+        pass
 
 
 @pytest.mark.parametrize("flags, reaching, done, learned", [
@@ -256,12 +264,22 @@ class _HealthyRun:
     (["--healthy-episodes", "0"], set(), 0, 0),
 ])
 def test_the_adaptation_damages_the_arm_after_its_healthy_episodes(flags, reaching, done,
-                                                                   learned):
+                                                                   learned, monkeypatch):
+    """The schedule's healthy episodes: learned ones until one reached and at least
+    ``--min-healthy-episodes`` ran, at most ``--healthy-episodes``; then the damage."""
     from pilco.tasks import adaptation
 
+    damaged = []
+    monkeypatch.setattr(adaptation, "damage", lambda run, s: damaged.append(len(run.episodes)))
+    for name in ("restart_after_damage", "per_output_noise", "stop_stuck_joints"):
+        monkeypatch.setattr(adaptation, name, lambda *a: None)
+    schedule = adaptation.AdaptationSchedule()
+    schedule.settings = ADAPTATION.parse(flags)
     run = _HealthyRun(reaching, done)
-    adaptation.run_healthy(run, ADAPTATION.parse(flags))
+    while schedule.before_episode(run, len(run.episodes) + 1) and not damaged:
+        run.run_learned_episode()
     assert len(run.records) - 1 == learned
+    assert damaged == [learned + 1] and run.summary_fields["damage_at_episode"] == learned + 2
 
 
 def test_the_damage_flag_gets_a_learnable_lengthscale_once_damaged_data_arrive():

@@ -215,9 +215,9 @@ def _on_system(view, number: int, env, seed: int) -> Episode:
     """Episode ``number``'s setting (its reset options) run on the real system ``env`` with
     the agent's current policy from the start of ``seed``."""
     agent = view.agent
-    options = view.reset_options(number) if getattr(view, "reset_options", None) else None
     return rollout(env, lambda x: agent.compute_action(x)[0], view.config.horizon, seed=seed,
-                   distance_fn=view.distance_fn, quiet=True, reset_options=options)
+                   distance_fn=view.hooks.distance, quiet=True,
+                   reset_options=view.hooks.reset_options(number))
 
 
 def _max_cost(agent, geometry: Optional[CostGeometry]) -> float:

@@ -60,7 +60,7 @@ def diagnose(exp, episode: Optional[int] = None, restarts: int = 3, seed: int = 
             env = view.make_env()
             # the env contract, before any rollout: a run reopened from its saved agent
             # makes its env from the config's id, without the task's wrapper
-            view.distance_fn(env, env.reset()[1])
+            view.hooks.distance(env, env.reset()[1])
         except Exception as err:  # the rollouts are optional evidence
             env = None
             logger.warning("the run's environment cannot be made or reports no distance "

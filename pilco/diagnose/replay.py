@@ -5,7 +5,7 @@ The run saves its agent after adding an episode's data and before fitting the ne
 so for the last episode ``agent.npz`` with its data cut back is exact; an earlier episode's
 agent is rebuilt by replaying the run's learning with its own settings and seeds (the
 experiment's own model and policy phases, :mod:`pilco.experiment.learning`, and the task's
-:class:`~pilco.experiment.Experiment`'s ``before_replayed_episode`` hook). Either way the policy
+hooks' ``before_replayed_episode``). Either way the policy
 is checked against the actions the episode recorded (:func:`action_error`).
 """
 from __future__ import annotations
@@ -46,23 +46,25 @@ def action_error(agent, episode: Episode) -> float:
 
 def replay_learning(exp, episode: int):
     """Repeat the run's learning up to episode ``episode``'s policy: build the agent on
-    the random episodes with ``exp.build_agent``, then for every learned episode j <=
-    ``episode`` fit the model on the data of episodes before j and optimise the policy, with
-    the run's settings and seeds; the task's ``exp.before_replayed_episode(exp, view, j)``
-    (if any) runs before each fit. Returns the view of ``exp`` (:func:`view_before`) holding the
-    agent; on the same arithmetic the policy is the run's own (see :func:`action_error`)."""
-    if exp.build_agent is None:
-        raise ValueError("replaying a run's learning needs its agent builder (the task's)")
+    the random episodes with the task's ``exp.hooks.build_agent``, then for every learned
+    episode j <= ``episode`` fit the model on the data of episodes before j and optimise the
+    policy, with the run's settings and seeds; the task's
+    ``exp.hooks.before_replayed_episode(exp, view, j)`` runs before each fit. Returns the
+    view of ``exp`` (:func:`view_before`) holding the agent; on the same arithmetic the
+    policy is the run's own (see :func:`action_error`)."""
     first = exp.config.random_episodes
     view = view_before(exp, first)
-    view.agent = exp.build_agent(view.training_data(), view.start_states())
+    try:
+        view.agent = exp.hooks.build_agent(view.training_data(), view.start_states())
+    except NotImplementedError as err:
+        raise ValueError(f"replaying a run's learning needs its agent builder (the "
+                         f"task's): {err}") from err
     for j in range(first + 1, episode + 1):
         t0 = time.perf_counter()
         view.episodes = list(exp.episodes[: j - 1])
         view.records = list(exp.records[: j - 1])
         view.give_agent_data(view.agent)
-        if exp.before_replayed_episode is not None:
-            exp.before_replayed_episode(exp, view, j)
+        exp.hooks.before_replayed_episode(exp, view, j)
         train_model(view, j)
         learn_policy(view, j)
         logger.info("replayed the model fit and policy optimisation of episode %d in %.1f s",

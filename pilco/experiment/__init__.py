@@ -7,6 +7,7 @@ module             job
 ``episode``        :class:`Episode`, :func:`rollout`, :func:`make_env`, the env contract
 ``settings``       :func:`setting` fields, settings classes declared once
 ``config``         :class:`LoopSettings`, :class:`ExperimentConfig`, the settings of a run
+``hooks``          :class:`RunHooks`, what a task tells the loop (one object)
 ``loop``           :class:`Experiment`, the paper's Algorithm 1 with saving/resume
 ``learning``       the model and policy phases of a learned episode, predictions
 ``scoring``        saturating cost, the solved rule, per-episode records
@@ -21,10 +22,12 @@ This package logs through :mod:`logging`; nothing here prints (the tasks print t
 from .config import ExperimentConfig, LoopSettings
 from .episode import (DISTANCE_KEYS, EnvironmentContractError, Episode, make_env, rollout,
                       stack_transitions)
+from .hooks import FunctionHooks, RunHooks
 from .loop import Experiment
 from .scoring import PHASES, episode_solved, saturating_cost
 from .store import RunStore
 
 __all__ = ["DISTANCE_KEYS", "EnvironmentContractError", "Episode", "Experiment",
-           "ExperimentConfig", "LoopSettings", "PHASES", "RunStore", "episode_solved",
-           "make_env", "rollout", "saturating_cost", "stack_transitions"]
+           "ExperimentConfig", "FunctionHooks", "LoopSettings", "PHASES", "RunHooks",
+           "RunStore", "episode_solved", "make_env", "rollout", "saturating_cost",
+           "stack_transitions"]

@@ -81,7 +81,7 @@ def distance_from_info(env, info: Dict[str, Any]) -> float:
         f"holds none of {', '.join(map(repr, DISTANCE_KEYS))} (it holds "
         f"{sorted(map(str, info)) or 'nothing'}). pilco scores every episode by the "
         f"distance of each state to the goal: put it in info as 'distance', or give the "
-        f"Experiment a distance_fn(env, info) -> float (in a Task: from hooks())")
+        f"task's RunHooks a distance(env, info) -> float")
 
 
 def make_env(env_id: str, env_kwargs: Optional[Dict[str, Any]] = None, render: bool = False):

@@ -35,8 +35,7 @@ def train_model(exp, number: int) -> None:
                               seed=exp.episode_seed(number), callback=optimizer_callback(bar),
                               min_rel_improvement=cfg.model_min_rel_improvement,
                               patience=cfg.model_patience)
-        if exp.after_model_fit is not None:
-            exp.after_model_fit(agent)
+        exp.hooks.after_model_fit(exp, number)
     exp.model_trained_on = (X.copy(), Y.copy())
 
 
@@ -65,8 +64,7 @@ def improve_policy(exp, number: int, runs: Optional[int] = None) -> float:
     if scale is not None or getattr(agent, "start_scale", None) is not None:
         agent.start_scale = scale
     exp.policy_notes = {}
-    if exp.before_policy_search is not None:
-        exp.before_policy_search(agent, number)
+    exp.hooks.before_policy_search(exp, number)
 
     def search(what: str, runs: int) -> float:
         return search_policy(exp, number, what, runs)

@@ -20,13 +20,14 @@ import contextlib
 import functools
 import logging
 import time
-from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
+from typing import Any, Dict, Iterator, Optional, Tuple
 
 import numpy as np
 
 from ..portable import portability_warning
 from .config import ExperimentConfig
-from .episode import Episode, distance_from_info, make_env, rollout
+from .episode import Episode, rollout
+from .hooks import RunHooks
 from .learning import learn_policy, predictions_after, predictions_before, train_model
 from .signals import (interrupts_deferred, raise_if_stop_requested,
                       sigterm_as_keyboard_interrupt, stop_requested)
@@ -55,109 +56,71 @@ class Experiment(RunRecord):
     Args:
         config: the run's :class:`ExperimentConfig`.
         directory: the run directory (created).
-        build_agent: ``(data (X [N, D+U], Y [N, D]), start_states [E, D]) -> PILCO``;
-            called once the random episodes are in (``start_states``: the first state
-            of every episode so far), and on resume when no saved agent can be read.
-        make_env: ``() -> env``; default :func:`~pilco.experiment.episode.make_env` of
-            ``config.env_id`` and ``config.env_kwargs``.
-        distance_fn: ``(env, info) -> float``; default ``info["distance"]`` or
-            ``info["tip_distance"]``.
+        hooks: what the task tells the loop (:class:`~pilco.experiment.hooks.RunHooks`):
+            its environment and agent, the episode schedule, what happens between the
+            phases, its success rule.
         settings: the task's settings as a JSON-ready dict, stored for ``--resume``.
-        render_fn: ``Episode -> frames`` drawing the final episode after it ran (e.g. a
-            replay in another process); the env then never renders during rollouts.
-        after_model_fit: ``agent -> None`` called after every ``optimize_models``.
-        before_policy_search: ``(agent, episode number) -> None`` called before every
-            ``optimize_policy`` (e.g. a reward that changes with the episode).
-        success_fn: ``summary -> bool``, the task's success rule written to the summary
-            as ``"success"`` (default: ``summary["solved"]``).
-        model_data: the task's choice of the model's transitions and their noise factors
-            (:attr:`~pilco.experiment.record.RunRecord.model_data`; default every
-            episode's, factors 1), also for the agent of a resumed run.
-        reset_options: ``episode number -> options of env.reset`` (e.g. the target of a
-            multi-task run's episode); default none.
-        before_replayed_episode: ``(run, view, episode number) -> None``: when the run's
-            learning is replayed (:func:`pilco.diagnose.replay.replay_learning`, e.g. by
-            ``python -m pilco.diagnose``), called before each learned episode's model fit
-            with this run and the replay's view, so that a task can redo what it changed in
-            its agent during the run (the adaptation's damage); default none.
+        resume: read the run saved in ``directory`` back (its episodes, records, fields,
+            task state and agent) to continue with its next episode; the agent comes from
+            ``agent.npz`` when it can be read, otherwise ``hooks.build_agent`` rebuilds it
+            on the saved data (its policy then starts afresh). ``config`` may differ from
+            the saved one (e.g. more ``episodes``).
 
-    The collected episodes, records, timings, task state, saving and the summary are
-    those of :class:`~pilco.experiment.record.RunRecord`.
+    Once opened (new or read back), ``hooks.opened(self)`` is called. The collected
+    episodes, records, timings, task state, saving and the summary are those of
+    :class:`~pilco.experiment.record.RunRecord`.
     """
 
-    def __init__(self, config: ExperimentConfig, directory: str,
-                 build_agent: Callable[[Data, np.ndarray], Any],
-                 make_env: Optional[Callable[[], Any]] = None,
-                 distance_fn: Optional[Callable[[Any, dict], float]] = None,
-                 settings: Optional[Dict[str, Any]] = None,
-                 render_fn: Optional[Callable[[Episode], List[np.ndarray]]] = None,
-                 after_model_fit: Optional[Callable[[Any], None]] = None,
-                 before_policy_search: Optional[Callable[[Any, int], None]] = None,
-                 success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None,
-                 model_data: Optional[Callable[[Any], Tuple[np.ndarray, np.ndarray,
-                                                            Optional[np.ndarray]]]] = None,
-                 reset_options: Optional[Callable[[int], Optional[dict]]] = None,
-                 before_replayed_episode: Optional[Callable[[Any, Any, int], None]] = None):
-        super().__init__(config, directory, settings, success_fn)
-        self.model_data = model_data
-        self.reset_options = reset_options
-        self.build_agent = build_agent
-        self.distance_fn = distance_fn or distance_from_info
-        self.render_fn = render_fn
-        self.after_model_fit = after_model_fit
-        self.before_policy_search = before_policy_search
-        self.before_replayed_episode = before_replayed_episode
-        self._make_env = make_env
+    def __init__(self, config: ExperimentConfig, directory: str, hooks: RunHooks,
+                 settings: Optional[Dict[str, Any]] = None, resume: bool = False):
+        if not isinstance(hooks, RunHooks):
+            raise TypeError(f"hooks must be a pilco.experiment.RunHooks (subclass it, or use "
+                            f"FunctionHooks(build_agent, ...)), not {type(hooks).__name__}")
+        super().__init__(config, directory, settings, hooks)
         self.env = None
+        if resume:
+            restore_progress(self, self.store.load_progress())
+            if len(self.episodes) >= config.random_episodes:
+                agent = self.store.load_agent()
+                if agent is None:
+                    agent = hooks.build_agent(self.training_data(), self.start_states())
+                self.give_agent_data(agent)
+                self.agent = agent
+            logger.info("resuming %s after episode %d", directory, len(self.episodes))
+        hooks.opened(self)
 
     def make_env(self):
-        """Create (once) and return the environment."""
+        """Create (once, ``hooks.make_env``) and return the environment."""
         if self.env is None:
-            if self._make_env is not None:
-                self.env = self._make_env()
-            else:
-                self.env = make_env(self.config.env_id, self.config.env_kwargs,
-                                    render=self.config.render and self.render_fn is None)
+            self.env = self.hooks.make_env(self)
         return self.env
 
     @classmethod
-    def resume(cls, directory: str, config: ExperimentConfig,
-               build_agent: Callable, **kwargs) -> "Experiment":
-        """Reload a run from ``directory`` to continue with its next episode.
-
-        The agent comes from ``agent.npz`` when it can be read, otherwise it is rebuilt
-        with ``build_agent`` on the saved data (its policy then starts afresh). ``config``
-        may differ from the saved one (e.g. more ``episodes``).
-        """
-        exp = cls(config, directory, build_agent, **kwargs)
-        restore_progress(exp, exp.store.load_progress())
-        if len(exp.episodes) >= config.random_episodes:
-            agent = exp.store.load_agent()
-            if agent is None:
-                agent = build_agent(exp.training_data(), exp.start_states())
-            exp.give_agent_data(agent)
-            exp.agent = agent
-        logger.info("resuming %s after episode %d", directory, len(exp.episodes))
-        return exp
+    def resume(cls, directory: str, config: ExperimentConfig, hooks: RunHooks,
+               settings: Optional[Dict[str, Any]] = None) -> "Experiment":
+        """The run saved in ``directory``, read back to continue with its next episode
+        (``Experiment(..., resume=True)``)."""
+        return cls(config, directory, hooks, settings, resume=True)
 
     def _interact(self, number: int, policy_fn, random_action=None) -> Episode:
         """Run episode ``number`` (random when ``policy_fn`` is None); the final episode is
         rendered. An interrupted rollout is kept as partial data and re-raised."""
         cfg, last = self.config, number == self.config.episodes
-        options = self.reset_options(number) if self.reset_options is not None else None
+        options = self.hooks.reset_options(number)
+        draws = self.hooks.draws_frames
         ep = rollout(self.make_env(), policy_fn, cfg.horizon, seed=self.episode_seed(number),
                      reset_options=options,
                      random=policy_fn is None, random_action=random_action,
-                     distance_fn=self.distance_fn,
-                     render=cfg.render and last and self.render_fn is None, quiet=cfg.quiet,
+                     distance_fn=self.hooks.distance,
+                     render=cfg.render and last and not draws, quiet=cfg.quiet,
                      desc=f"episode {number} interaction"
                           + (" (random)" if policy_fn is None else ""))
         if ep.interrupted:
             self._partial = ep
             raise KeyboardInterrupt
-        if last and cfg.render and self.render_fn is not None:
+        if last and cfg.render and draws:
             try:
-                ep.frames = list(self.render_fn(ep))
+                ep.frames = list(self.hooks.render(self, ep))
             except Exception as err:  # frames are optional
                 logger.warning("rendering the final episode failed: %s", err)
         return ep
@@ -175,18 +138,17 @@ class Experiment(RunRecord):
         if self.agent is None and number >= cfg.random_episodes:
             self.episodes.append(ep)  # build_agent sees this episode's data
             try:
-                self.agent = self.build_agent(self.training_data(), self.start_states())
+                self.agent = self.hooks.build_agent(self.training_data(), self.start_states())
             finally:
                 self.episodes.pop()
         return self._add_episode(ep, {"interaction": ep.seconds}, {})
 
-    def run_learned_episode(self, watch: Optional[Callable[[Callable], Callable]] = None
-                            ) -> Dict[str, Any]:
+    def run_learned_episode(self) -> Dict[str, Any]:
         """Train the model, optimise the policy, run it for one episode, store everything.
 
-        ``watch``: ``policy_fn -> policy_fn``, wraps the agent's policy ``x [D] -> u [U]``
-        for this episode's interaction (a task that watches the states as they come, and
-        may change the agent mid-episode, e.g. re-plan). Seconds it notes in
+        The episode runs ``hooks.watch(self, number, policy)``, the agent's policy
+        ``x [D] -> u [U]`` or a wrapper that watches the states as they come (and may
+        change the agent mid-episode, e.g. re-plan). Seconds it notes in
         ``policy_notes["paused_seconds"]`` (a pause to re-plan) count as policy time, not
         interaction; ``policy_notes["extra_evaluations"]`` as the episode's policy
         evaluations."""
@@ -209,7 +171,7 @@ class Experiment(RunRecord):
         def policy(x):  # the agent's policy of the moment (a watch may change it)
             return agent.compute_action(x)[0]
 
-        ep = self._interact(number, policy if watch is None else watch(policy))
+        ep = self._interact(number, self.hooks.watch(self, number, policy))
         paused = float(self.policy_notes.pop("paused_seconds", 0.0))
         seconds["interaction"] = ep.seconds - paused
         seconds["policy"] += paused
@@ -255,13 +217,17 @@ class Experiment(RunRecord):
                 self.save_progress()
 
     def run(self) -> Dict[str, Any]:
-        """Run (or continue) until ``config.episodes`` episodes; returns the summary."""
+        """Run (or continue) the episodes of the task's schedule (``hooks.before_episode``,
+        by default until ``config.episodes``), calling ``hooks.after_episode`` after each
+        and ``hooks.finished`` at its end; returns the summary."""
         self.complete = False
         with self.session():
-            while len(self.episodes) < self.config.episodes:
+            while self.hooks.before_episode(self, len(self.episodes) + 1):
                 self.run_episode()
+                self.hooks.after_episode(self, len(self.episodes))
                 raise_if_stop_requested()
             self.complete = True
+            self.hooks.finished(self)
         return self.summary()
 
     def close(self) -> None:

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
 from .config import ExperimentConfig
 from .episode import Episode, stack_transitions
+from .hooks import RunHooks
 from .scoring import PHASES, episode_record, episode_solved, summarise
 from .store import RunStore, progress_record
 
@@ -26,18 +27,20 @@ class RunRecord:
 
     What a task keeps across a resume lives in ``task_state`` (a JSON-ready dict, saved
     in ``progress.json``) and ``summary_fields`` (extra fields of the summary, e.g. when a
-    damage happened). A task that chooses which transitions its model learns from, or
-    weighs them, sets ``model_data`` (see :meth:`training_data`).
+    damage happened). Which transitions the model learns from, and the success rule, are
+    the task's ``hooks`` (:meth:`~pilco.experiment.hooks.RunHooks.model_data`,
+    :meth:`~pilco.experiment.hooks.RunHooks.success`).
     """
 
     def __init__(self, config: ExperimentConfig, directory: str,
                  settings: Optional[Dict[str, Any]] = None,
-                 success_fn: Optional[Callable[[Dict[str, Any]], bool]] = None):
+                 hooks: Optional[RunHooks] = None):
         self.config = config
         self.store = RunStore(directory)
         #: the task's settings (JSON-ready), saved for ``--resume``
         self.settings = dict(settings or {})
-        self.success_fn = success_fn
+        #: what the task tells the loop (:class:`~pilco.experiment.hooks.RunHooks`)
+        self.hooks = RunHooks() if hooks is None else hooks
         self.agent = None
         self.episodes: List[Episode] = []
         self.records: List[Dict[str, Any]] = []
@@ -48,11 +51,6 @@ class RunRecord:
         self.wall_seconds = 0.0
         #: what the task keeps across a resume (JSON-ready; saved in progress.json)
         self.task_state: Dict[str, Any] = {}
-        #: ``record -> (X [N, D+U], Y [N, D], noise factors [N] or [D, N] or None)``: the
-        #: transitions the model learns from and their noise-variance factors, before the
-        #: ``max_data`` cap; None: every episode's transitions, all factors 1
-        self.model_data: Optional[Callable[["RunRecord"], Tuple[np.ndarray, np.ndarray,
-                                                               Optional[np.ndarray]]]] = None
         self.summary_fields: Dict[str, Any] = {}
         self.interrupted = False
         self.complete = False
@@ -79,13 +77,14 @@ class RunRecord:
         return stack_transitions(self.episodes)
 
     def _model_data(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:attr:`model_data`'s transitions and factors (default: every episode, factors 1),
-        the first ``max_data`` of them."""
-        if self.model_data is None:
+        """The hooks' :meth:`~pilco.experiment.hooks.RunHooks.model_data` transitions and
+        factors (default: every episode, factors 1), the first ``max_data`` of them."""
+        chosen = self.hooks.model_data(self)
+        if chosen is None:
             X, Y = stack_transitions(self.episodes)
             scales = None
         else:
-            X, Y, scales = self.model_data(self)
+            X, Y, scales = chosen
         scales = np.ones(len(X)) if scales is None else np.asarray(scales, dtype=float)
         cap = self.config.max_data
         if cap is not None:
@@ -94,13 +93,13 @@ class RunRecord:
 
     def training_data(self) -> Data:
         """The model's transitions ``X [N, D+U]``, ``Y [N, D]``: those of
-        :attr:`model_data` (default: every episode's), the first ``max_data`` of them."""
+        the hooks' ``model_data`` (default: every episode's), the first ``max_data`` of them."""
         X, Y, _ = self._model_data()
         return X, Y
 
     def training_noise_scales(self) -> np.ndarray:
         """Noise-variance factor of each transition of :meth:`training_data`, [N] (or
-        [D, N], one row per output GP): :attr:`model_data`'s, default all 1."""
+        [D, N], one row per output GP): the hooks' ``model_data``'s, default all 1."""
         return self._model_data()[2]
 
     def give_agent_data(self, agent) -> None:

@@ -130,5 +130,5 @@ def summarise(exp) -> Dict[str, Any]:
     solved = solved_episodes(exp.records, summary["distances"], exp.config)
     summary["solved_episodes"] = solved
     summary["held_for_good"] = _held_from_first(exp.records, solved)
-    summary["success"] = bool(exp.success_fn(summary) if exp.success_fn else summary["solved"])
+    summary["success"] = bool(exp.hooks.success(summary))
     return summary

@@ -132,7 +132,7 @@ def open_run(directory: str):
     saved agent alone."""
     import logging
 
-    from ..experiment import Experiment, ExperimentConfig, RunStore
+    from ..experiment import Experiment, ExperimentConfig, RunHooks, RunStore
 
     progress = RunStore(directory).load_progress()
     task = progress["config"]["task"]
@@ -144,5 +144,5 @@ def open_run(directory: str):
         (log.warning if is_task_reference(task) else log.info)(
             "%s; the run is reopened from its saved agent", err)
         return Experiment.resume(directory, ExperimentConfig.from_saved(progress["config"]),
-                                 build_agent=None)
+                                 RunHooks())
     return found.reopen(directory)

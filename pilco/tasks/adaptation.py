@@ -42,15 +42,16 @@ import logging
 import os
 from typing import Any, Dict, List, Optional
 
-from ..experiment import Experiment
+from ..experiment import Experiment, RunHooks
 from . import reacher, reacher_agent
 from .adaptation_model import (ReplanWhenStuck, _stop_commanding, damaged_arm_data,
                                learn_the_flag, per_output_noise, stop_stuck_joints,
                                track_damage_data)
 from .settings import non_negative_int, positive_float, positive_int, setting, task_settings
 
-__all__ = ["AdaptationSettings", "AdaptationTask", "ADAPTATION", "damage", "replay_damage",
-           "recovered_within", "run_healthy", "restart_after_damage", "run", "RECOVER_WITHIN"]
+__all__ = ["AdaptationSettings", "AdaptationTask", "AdaptationHooks", "AdaptationSchedule",
+           "ADAPTATION", "damage", "replay_damage", "recovered_within", "restart_after_damage",
+           "RECOVER_WITHIN"]
 
 logger = logging.getLogger(__name__)
 
@@ -217,65 +218,97 @@ def _recovered_after(exp: Experiment, first: int) -> Optional[int]:
     return None
 
 
-def run_healthy(exp: Experiment, s: AdaptationSettings) -> None:
-    """Learned episodes on the healthy arm until one has reached the target and at least
-    ``--min-healthy-episodes`` ran, at most ``--healthy-episodes`` (a resumed run's
-    episodes count)."""
-    healthy = sum(not r["random"] for r in exp.records)
-    solved = _learned_solved(exp)
-    while healthy < s.healthy_episodes and (
-            not solved or healthy < s.min_healthy_episodes):
-        exp.run_learned_episode()
-        healthy += 1
-        solved = solved or exp.episode_solved(exp.episodes[-1])
+class AdaptationSchedule(RunHooks):
+    """The adaptation's schedule and what it changes between episodes, for hooks whose
+    :attr:`settings` are :class:`AdaptationSettings` (:class:`AdaptationHooks` adds them
+    to the reacher's run): healthy episodes until one reached the target and at least
+    ``--min-healthy-episodes`` ran (at most ``--healthy-episodes``), then the damage
+    (:func:`damage`) before the first damaged episode, then damaged episodes until the arm
+    reaches again or their budget is spent; the first damaged episode watches the joints
+    (:class:`~pilco.tasks.adaptation_model.ReplanWhenStuck`), and after each damaged one
+    the healthy data's noise factors and the joints found stuck are updated
+    (:func:`per_output_noise`, :func:`stop_stuck_joints`). Resumable at any episode: a run
+    read back after the damage breaks its fresh env again before its next episode."""
 
+    settings: AdaptationSettings
+    #: whether this process's env is broken (set once :meth:`before_episode` broke it)
+    _damaged: bool = False
 
-def _watch(exp: Experiment, s: AdaptationSettings, first: int):
-    """The first damaged episode's :class:`ReplanWhenStuck` (with ``--replan-stuck-joints``
-    and ``--stop-stuck-joints``, while no joint was judged yet), else None."""
-    if (s.replan_stuck_joints and s.stop_stuck_joints
-            and exp.summary_fields.get("stuck_joints") is None):
-        return ReplanWhenStuck(exp, s, first, len(exp.episodes) + 1)
-    return None
+    def opened(self, run) -> None:
+        """The adaptation's summary fields and the data it tracks."""
+        super().opened(run)
+        run.summary_fields = {"healthy_reached_at_episode": None, "damage_at_episode": None,
+                              "episodes_to_recover": None, **run.summary_fields}
+        track_damage_data(run)
 
+    def model_data(self, run):
+        return damaged_arm_data(run)
 
-def run(exp: Experiment, s: AdaptationSettings) -> Dict[str, Any]:
-    """Healthy episodes until one reaches, the damage, damaged episodes until the arm
-    reaches again (or their budget is spent); resumable at any episode."""
-    fields, state = exp.summary_fields, track_damage_data(exp)
-    exp.complete = False
-    with exp.session():
-        while len(exp.episodes) < s.random_episodes:
-            exp.run_random_episode()
+    def before_episode(self, run, number: int) -> bool:
+        s, fields = self.settings, run.summary_fields
+        if number <= s.random_episodes:
+            return True
         if fields["damage_at_episode"] is None:
-            run_healthy(exp, s)
-            fields["healthy_reached_at_episode"] = exp.solved_at_episode()
-            damage(exp, s)
-            fields["damage_at_episode"] = len(exp.episodes) + 1
+            healthy = sum(not r["random"] for r in run.records)
+            if healthy < s.healthy_episodes and (
+                    not _learned_solved(run) or healthy < s.min_healthy_episodes):
+                return True  # one more healthy episode
+            fields["healthy_reached_at_episode"] = run.solved_at_episode()
+            damage(run, s)
+            fields["damage_at_episode"] = number
+            state = track_damage_data(run)
             if s.drop_old_data:
-                state["train_from_episode"] = fields["damage_at_episode"]
+                state["train_from_episode"] = number
             state["older_noise_scale"] = s.old_data_noise
-            state["older_before_episode"] = fields["damage_at_episode"]
-            exp.save_progress()
-        else:
-            damage(exp, s)  # resuming after the damage: break the fresh env again
+            state["older_before_episode"] = number
+            run.save_progress()
+        elif not self._damaged:  # read back after the damage: break the fresh env again
+            damage(run, s)
         first = fields["damage_at_episode"]
-        restart_after_damage(exp, s, first)
+        if not self._damaged:
+            self._damaged = True
+            restart_after_damage(run, s, first)
+            self._after_damaged_episode(run)
+        if number - first >= s.damaged_episodes:
+            return False
+        return fields["episodes_to_recover"] is None or s.no_stop_when_recovered
+
+    def _after_damaged_episode(self, run) -> None:
+        """The recovery count, the healthy data's noise factors and the joints found
+        stuck, from the damaged episodes so far (none yet right after the damage)."""
+        s, first = self.settings, run.summary_fields["damage_at_episode"]
         # also on resume: a run killed after an episode's files but before this field's
         # save counts its recovery from the episodes themselves
-        fields["episodes_to_recover"] = _recovered_after(exp, first)
-        per_output_noise(exp, s, first)  # a run resumed after the first damaged episode
-        stop_stuck_joints(exp, s, first)
-        while len(exp.episodes) - first + 1 < s.damaged_episodes:
-            if fields["episodes_to_recover"] is not None and not s.no_stop_when_recovered:
-                break
-            exp.run_learned_episode(watch=_watch(exp, s, first))
-            fields["episodes_to_recover"] = _recovered_after(exp, first)
-            per_output_noise(exp, s, first)
-            stop_stuck_joints(exp, s, first)
-            exp.save_progress()
-        exp.complete = True
-    return exp.summary()
+        run.summary_fields["episodes_to_recover"] = _recovered_after(run, first)
+        per_output_noise(run, s, first)
+        stop_stuck_joints(run, s, first)
+
+    def after_episode(self, run, number: int) -> None:
+        first = run.summary_fields["damage_at_episode"]
+        if first is not None and number >= first:
+            self._after_damaged_episode(run)
+            run.save_progress()
+
+    def watch(self, run, number: int, policy):
+        """The first damaged episode's :class:`ReplanWhenStuck` (with
+        ``--replan-stuck-joints`` and ``--stop-stuck-joints``, while no joint was judged
+        yet); otherwise the policy itself."""
+        s, first = self.settings, run.summary_fields["damage_at_episode"]
+        if (first is not None and number >= first and s.replan_stuck_joints
+                and s.stop_stuck_joints and run.summary_fields.get("stuck_joints") is None):
+            return ReplanWhenStuck(run, s, first, number)(policy)
+        return policy
+
+    def before_replayed_episode(self, run, view, number: int) -> None:
+        replay_damage(self.settings)(run, view, number)
+
+    def success(self, summary: Dict[str, Any]) -> bool:
+        return recovered_within(RECOVER_WITHIN)(summary)
+
+
+class AdaptationHooks(AdaptationSchedule, reacher.ReacherHooks):
+    """The reacher's run (:class:`~pilco.tasks.reacher.ReacherHooks`) on the adaptation's
+    schedule (:class:`AdaptationSchedule`)."""
 
 
 class AdaptationTask(reacher.ReacherTask):
@@ -310,19 +343,7 @@ class AdaptationTask(reacher.ReacherTask):
             env = DamageFlag(env)
         return env
 
-    def hooks(self, s: AdaptationSettings, env) -> Dict[str, Any]:
-        return dict(super().hooks(s, env), success_fn=recovered_within(RECOVER_WITHIN),
-                    model_data=damaged_arm_data, before_replayed_episode=replay_damage(s))
-
-    def prepare(self, exp: Experiment, s: AdaptationSettings) -> None:
-        """The adaptation's summary fields and the data it tracks."""
-        super().prepare(exp, s)
-        exp.summary_fields = {"healthy_reached_at_episode": None, "damage_at_episode": None,
-                              "episodes_to_recover": None, **exp.summary_fields}
-        track_damage_data(exp)
-
-    def run(self, exp: Experiment, s: AdaptationSettings) -> Dict[str, Any]:
-        return run(exp, s)
+    run_hooks = AdaptationHooks
 
     def notes(self, summary: Dict[str, Any]) -> List[str]:
         return [f"\ndamage at episode {summary['damage_at_episode']}; episodes to recover: "

@@ -41,16 +41,15 @@ DATA_STATE = dict(train_from_episode=1, older_noise_scale=1.0, older_before_epis
 
 def track_damage_data(exp) -> dict:
     """Give the run ``exp`` the adaptation's data state (its ``task_state``, with the
-    :data:`DATA_STATE` defaults for keys it lacks) and :func:`damaged_arm_data` as the
-    choice of its model's transitions; returns the state."""
+    :data:`DATA_STATE` defaults for keys it lacks); returns the state. The run's hooks
+    choose its model's transitions with :func:`damaged_arm_data`."""
     for key, value in DATA_STATE.items():
         exp.task_state.setdefault(key, list(value) if isinstance(value, list) else value)
-    exp.model_data = damaged_arm_data
     return exp.task_state
 
 
 def damaged_arm_data(record):
-    """The adaptation's model transitions (``RunRecord.model_data``): the episodes from
+    """The adaptation's model transitions (its hooks' ``model_data``): the episodes from
     ``train_from_episode`` on (at least the last one), the inert actions at 0 from
     ``inert_from_episode`` on, the first ``max_data``; their noise factors are
     ``older_noise_scale`` for the episodes before ``older_before_episode``, else 1, and
@@ -211,7 +210,7 @@ class ReplanWhenStuck:
     pilco.diagnose``) does not redo the pause: its next policy search starts from the
     policy before it.
 
-    Use as ``exp.run_learned_episode(watch=ReplanWhenStuck(exp, s, first, number))``."""
+    Use as the hooks' ``watch``: ``ReplanWhenStuck(exp, s, first, number)(policy)``."""
 
     def __init__(self, exp: Experiment, s: AdaptationSettings, first: int, number: int):
         self.exp, self.s, self.first, self.number = exp, s, first, number

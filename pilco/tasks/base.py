@@ -2,8 +2,9 @@
 
 A task is a settings class (a frozen dataclass, :mod:`pilco.tasks.settings`) and the
 builders that turn one settings object into a run: the loop's configuration
-(:meth:`Task.config`), the agent (:meth:`Task.agent_builder`), the hooks the loop calls
-(:meth:`Task.hooks`), the figures. The settings are handed down as one typed object;
+(:meth:`Task.config`), the agent (:meth:`Task.agent_builder`), the one object the loop
+calls into (:class:`TaskHooks`, a :class:`~pilco.experiment.hooks.RunHooks`), the
+figures. The settings are handed down as one typed object;
 nothing below reads the command line. :meth:`Task.main` is the whole command::
 
     settings = task.parse(argv)         # flags, --preset, --resume
@@ -20,11 +21,12 @@ import sys
 from typing import Any, Callable, ClassVar, Dict, List, Mapping, Optional, Sequence, Type
 
 from ..experiment import (EnvironmentContractError, Experiment, ExperimentConfig,
-                          LoopSettings)
+                          LoopSettings, RunHooks)
 from ..experiment.report import format_episode_table, format_timing_table
+from ..experiment.scoring import solved_in_last_episode
 from .settings import RunSettings, build_parser, parse_settings, settings_to_dict
 
-__all__ = ["Task", "RunDirectoryError"]
+__all__ = ["Task", "TaskHooks", "LastEpisodeHooks", "RunDirectoryError"]
 
 logger = logging.getLogger(__name__)
 
@@ -34,13 +36,41 @@ class RunDirectoryError(ValueError):
     run's."""
 
 
+class TaskHooks(RunHooks):
+    """The hooks of a task's run (:class:`~pilco.experiment.hooks.RunHooks`): the env the
+    task made (:meth:`Task.make_env`, before the agent, whose builder may need it), the
+    agent of :meth:`Task.agent_builder`, the task's settings and loop configuration as
+    :attr:`settings` and :attr:`config`. A task with more to say subclasses it and names
+    the subclass as its :attr:`Task.run_hooks`."""
+
+    def __init__(self, task: "Task", settings: RunSettings, config: ExperimentConfig, env):
+        self.task, self.settings, self.config, self.env = task, settings, config, env
+        self._build = task.agent_builder(settings, env)
+
+    def make_env(self, run):
+        return self.env
+
+    def build_agent(self, data, start_states):
+        return self._build(data, start_states)
+
+
+class LastEpisodeHooks(TaskHooks):
+    """Success: the task is still solved in the run's last episode
+    (:func:`~pilco.experiment.scoring.solved_in_last_episode`)."""
+
+    def success(self, summary: Dict[str, Any]) -> bool:
+        return solved_in_last_episode(self.config)(summary)
+
+
 class Task:
     """One of the paper's experiments, built from a settings object.
 
     Subclasses set :attr:`name`, :attr:`settings`, :attr:`description` (and
     :attr:`presets`, :attr:`paper_seconds`), and define :meth:`config` and
-    :meth:`agent_builder`; the other methods have defaults that run the loop of
-    :class:`~pilco.experiment.Experiment`.
+    :meth:`agent_builder`, and name their :class:`TaskHooks` subclass as
+    :attr:`run_hooks` when the loop needs more of them (the success rule, the episode
+    schedule, what happens between the phases); the other methods have defaults that run
+    the loop of :class:`~pilco.experiment.Experiment`.
     """
 
     #: the task's name (the summary's ``task``, the sweep's and the registry's key)
@@ -143,48 +173,35 @@ class Task:
     #: False when the task changes its system during a run (the adaptation breaks its arm):
     #: an env made from the settings is then not the system a late episode ran on
     system_from_settings: ClassVar[bool] = True
-    #: True when :meth:`render_fn` draws the final episode (the env then never renders)
-    replays_frames: ClassVar[bool] = False
+    #: the class of the run's hooks (:meth:`hooks`)
+    run_hooks: ClassVar[Type[TaskHooks]] = TaskHooks
 
     def make_env(self, settings: RunSettings, config: ExperimentConfig):
         """The run's environment (made before the agent, whose builder may need it)."""
         from ..experiment import make_env
 
         return make_env(config.env_id, config.env_kwargs,
-                        render=config.render and not self.replays_frames)
+                        render=config.render and not self.run_hooks.draws_frames)
 
-    def render_fn(self, settings: RunSettings, env) -> Optional[Callable]:
-        """``Episode -> frames`` drawing the final episode in another way than the env's
-        own renderer (None: the env renders)."""
-        return None
-
-    def hooks(self, settings: RunSettings, env) -> Dict[str, Any]:
-        """Keyword arguments of :class:`~pilco.experiment.Experiment` beyond the config,
-        the agent builder and the env: ``after_model_fit``, ``before_policy_search``,
-        ``success_fn``, ``model_data``, ``reset_options``, ``before_replayed_episode``."""
-        return {}
+    def hooks(self, settings: RunSettings, config: ExperimentConfig, env) -> RunHooks:
+        """What the loop calls into for a run of these settings on ``env``: an instance
+        of :attr:`run_hooks` (:class:`TaskHooks` or the task's subclass of it)."""
+        return self.run_hooks(self, settings, config, env)
 
     def experiment(self, settings: RunSettings) -> Experiment:
         """A new run in ``settings.output``, or the one saved there with ``--resume``."""
         config = self.config(settings)
         env = self.make_env(settings, config)
-        kwargs = dict(make_env=lambda: env, render_fn=self.render_fn(settings, env),
-                      settings=settings_to_dict(settings), **self.hooks(settings, env))
-        build = self.agent_builder(settings, env)
-        if settings.resume:
-            try:
-                exp = Experiment.resume(settings.output, config, build, **kwargs)
-            except (OSError, ValueError, KeyError) as err:  # missing, damaged, foreign files
-                env.close()
-                raise RunDirectoryError(f"--resume {settings.output}: cannot reopen the run "
-                                        f"({type(err).__name__}: {err})") from err
-        else:
-            exp = Experiment(config, settings.output, build, **kwargs)
-        self.prepare(exp, settings)
-        return exp
-
-    def prepare(self, exp: Experiment, settings: RunSettings) -> None:
-        """Task state of a new or resumed run, set after the experiment is opened."""
+        hooks = self.hooks(settings, config, env)
+        try:
+            return Experiment(config, settings.output, hooks, settings_to_dict(settings),
+                              resume=bool(settings.resume))
+        except (OSError, ValueError, KeyError) as err:  # missing, damaged, foreign files
+            if not settings.resume:
+                raise
+            env.close()
+            raise RunDirectoryError(f"--resume {settings.output}: cannot reopen the run "
+                                    f"({type(err).__name__}: {err})") from err
 
     def reopen(self, directory: str) -> Experiment:
         """The run saved in ``directory`` with its saved settings, quiet and without
@@ -198,7 +215,7 @@ class Task:
 
     # -- running and reporting ------------------------------------------------------------
     def run(self, exp: Experiment, settings: RunSettings) -> Dict[str, Any]:
-        """The run's learning; returns the summary."""
+        """The run's learning (its schedule is the hooks'); returns the summary."""
         return exp.run()
 
     def figures(self, exp: Experiment, settings: RunSettings) -> List[str]:

@@ -62,7 +62,7 @@ import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
 from ..experiment.scoring import held_for_good_rule
-from .base import Task
+from .base import Task, TaskHooks
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
 
@@ -110,6 +110,14 @@ def init_policy_from_start(controller, start_std: float, seed: int) -> None:
     start_draw(start_std)(controller, seed)
 
 
+class CartPoleHooks(TaskHooks):
+    """Success: held for good, the pole held in the first solved learned episode and in
+    every learned episode after it."""
+
+    def success(self, summary) -> bool:
+        return held_for_good_rule(self.config)(summary)
+
+
 class CartPoleTask(Task):
     """The MATLAB release's cart-pole swing-up."""
 
@@ -154,10 +162,7 @@ class CartPoleTask(Task):
 
         return build
 
-    def hooks(self, s: CartPoleSettings, env):
-        """Success: held for good, the pole held in the first solved learned episode and
-        in every learned episode after it."""
-        return dict(success_fn=held_for_good_rule(self.config(s)))
+    run_hooks = CartPoleHooks
 
     def figures(self, exp: Experiment, s: CartPoleSettings) -> List[str]:
         """Distances, predicted vs real cost, one- and multi-step predictions, the final

@@ -35,8 +35,7 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 
 from ..experiment import ExperimentConfig
-from ..experiment.scoring import solved_in_last_episode
-from .base import Task
+from .base import LastEpisodeHooks, Task
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
 
@@ -182,8 +181,7 @@ class GymTask(Task):
 
         return build
 
-    def hooks(self, s: GymSettings, env) -> Dict[str, Any]:
-        return dict(success_fn=solved_in_last_episode(self.config(s)))
+    run_hooks = LastEpisodeHooks
 
     def figures(self, exp, s: GymSettings) -> List[str]:
         """Distances per step, predicted vs real cost, one- and multi-step predictions of

@@ -23,8 +23,7 @@ from typing import List
 import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
-from ..experiment.scoring import solved_in_last_episode
-from .base import Task
+from .base import LastEpisodeHooks, Task
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
 
@@ -94,8 +93,7 @@ class PendulumTask(Task):
 
         return build
 
-    def hooks(self, s: PendulumSettings, env):
-        return dict(success_fn=solved_in_last_episode(self.config(s)))
+    run_hooks = LastEpisodeHooks
 
     def figures(self, exp: Experiment, s: PendulumSettings) -> List[str]:
         """|θ| per step, predicted vs real cost, one- and multi-step predictions, the

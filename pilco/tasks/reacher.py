@@ -71,12 +71,12 @@ import numpy as np
 
 from ..envs.fetch_damage import DAMAGE_MODES
 from ..experiment import Experiment, ExperimentConfig, make_env
-from .base import Task
+from .base import Task, TaskHooks
 from .reacher_agent import after_model_fit, agent_builder, schedule, set_gp_priors
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
 
-__all__ = ["ReacherSettings", "DamagedReacherSettings", "ReacherTask", "REACHER",
+__all__ = ["ReacherSettings", "DamagedReacherSettings", "ReacherTask", "ReacherHooks", "REACHER",
            "DAMAGED_REACHER", "env_kwargs", "reached_within", "SUCCESS_STEPS", "draw_target",
            "check_drawn_target", "PAPER_CODE", "PAPER_CODE_DAMAGED", "LEARNED_EPISODES"]
 
@@ -250,6 +250,40 @@ def reached_within(steps: int):
     return success
 
 
+class ReacherHooks(TaskHooks):
+    """The reacher's run: the frames replayed in another process, the constant inputs'
+    lengthscales after every model fit, the cost width and start variance of the
+    episode's schedule, reached within :data:`SUCCESS_STEPS` steps."""
+
+    draws_frames = True
+
+    def __init__(self, task, s: ReacherSettings, config: ExperimentConfig, env):
+        super().__init__(task, s, config, env)
+        self._adjust, self._schedule = after_model_fit(s), schedule(s)
+
+    def opened(self, run) -> None:
+        if run.agent is not None:  # resumed from agent.npz, which holds no priors
+            set_gp_priors(run.agent, self.settings)
+
+    def render(self, run, episode):
+        """The final episode's frames, replayed from its joint angles in another process
+        (MuJoCo's EGL renderer and TensorFlow cannot share a process), with the target of
+        the episode just run."""
+        from ..envs.fetch_render import replay_fetch_frames
+
+        return replay_fetch_frames(episode.states[:, 3:10], self.env.unwrapped.target,
+                                   *self.settings.render_size)
+
+    def after_model_fit(self, run, number: int) -> None:
+        self._adjust(run.agent)
+
+    def before_policy_search(self, run, number: int) -> None:
+        self._schedule(run.agent, number)
+
+    def success(self, summary: Dict[str, Any]) -> bool:
+        return reached_within(SUCCESS_STEPS)(summary)
+
+
 class ReacherTask(Task):
     """The Fetch joint-space reacher (``damaged``: with the paper's damaged arm)."""
 
@@ -259,7 +293,6 @@ class ReacherTask(Task):
     presets = {"paper-code": PAPER_CODE}
     paper_seconds = PAPER_SECONDS
     damaged = False
-    replays_frames = True
 
     def config(self, s: ReacherSettings) -> ExperimentConfig:
         from ..envs import FETCH_DAMAGED_ID, FETCH_ID
@@ -278,27 +311,10 @@ class ReacherTask(Task):
             check_drawn_target(env)
         return env
 
-    def render_fn(self, s: ReacherSettings, env):
-        """The final episode's frames, replayed from its joint angles in another process
-        (MuJoCo's EGL renderer and TensorFlow cannot share a process)."""
-        from ..envs.fetch_render import replay_fetch_frames
-
-        def render(episode):  # the target of the episode just run
-            return replay_fetch_frames(episode.states[:, 3:10], env.unwrapped.target,
-                                       *s.render_size)
-
-        return render
-
     def agent_builder(self, s: ReacherSettings, env):
         return agent_builder(s, env.unwrapped.target, env.unwrapped.joint_limits)
 
-    def hooks(self, s: ReacherSettings, env) -> Dict[str, Any]:
-        return dict(after_model_fit=after_model_fit(s), before_policy_search=schedule(s),
-                    success_fn=reached_within(SUCCESS_STEPS))
-
-    def prepare(self, exp: Experiment, s: ReacherSettings) -> None:
-        if exp.agent is not None:  # resumed from agent.npz, which holds no priors
-            set_gp_priors(exp.agent, s)
+    run_hooks = ReacherHooks
 
     def figures(self, exp: Experiment, s: ReacherSettings) -> List[str]:
         """Distances, predicted vs real cost, one- and multi-step predictions, the final

@@ -32,11 +32,11 @@ import numpy as np
 from ..experiment import Experiment, ExperimentConfig, make_env
 from ..experiment.episode import rollout
 from . import reacher
-from .reacher_agent import after_model_fit, position_weights, reacher_agent
+from .reacher_agent import position_weights, reacher_agent
 from .settings import non_negative_float, positive_int, setting, task_settings
 
-__all__ = ["MultiReacherSettings", "MultiReacherTask", "REACHER_MULTI", "draw_targets",
-           "SUCCESS_SHARE", "CONTEXT"]
+__all__ = ["MultiReacherSettings", "MultiReacherTask", "MultiReacherHooks", "REACHER_MULTI",
+           "draw_targets", "SUCCESS_SHARE", "CONTEXT"]
 
 logger = logging.getLogger(__name__)
 
@@ -74,6 +74,58 @@ def draw_targets(seed: int, count: int, cube: float, around, stream: int) -> np.
     ``around`` [3], from a generator of ``(stream, seed)``."""
     rng = np.random.default_rng([stream, int(seed)])
     return np.asarray(around, dtype=np.float64) + rng.uniform(-cube, cube, size=(count, 3))
+
+
+class MultiReacherHooks(reacher.ReacherHooks):
+    """The multi-target run: each episode's training target (its reset options), the
+    multi-target start-variance schedule, the summary's targets and the test of the final
+    policy on the held-out ones once the run is complete; success as many of them reached
+    as :data:`SUCCESS_SHARE` asks."""
+
+    def __init__(self, task: "MultiReacherTask", s: MultiReacherSettings,
+                 config: ExperimentConfig, env):
+        super().__init__(task, s, config, env)
+        self._schedule = schedule(s)
+        self.train = task.targets(s, TRAIN_STREAM, s.training_targets)
+        self.test_targets = task.targets(s, TEST_STREAM, s.test_targets)
+
+    def opened(self, run) -> None:
+        super().opened(run)
+        run.summary_fields = {
+            "training_targets": self.train.tolist(), "test_targets": self.test_targets.tolist(),
+            "test_steps": None, "test_reached": None, **run.summary_fields}
+
+    def reset_options(self, number: int) -> Optional[dict]:
+        return {"target": self.train[(number - 1) % len(self.train)]}
+
+    def finished(self, run) -> None:
+        """The test of the final policy on the held-out targets (once per run)."""
+        if run.summary_fields.get("test_steps") is None:
+            self.test(run)
+            run.save_progress()
+
+    def test(self, run) -> List[Optional[int]]:
+        """Run the agent's policy on every test target from the arm's start (seeds
+        beyond the run's episodes'); the steps to the target (None: not reached)."""
+        s, env, agent = self.settings, run.make_env(), run.agent
+        steps: List[Optional[int]] = []
+        for k, target in enumerate(run.summary_fields["test_targets"]):
+            episode = rollout(env, lambda x: agent.compute_action(x)[0], s.horizon,
+                              seed=run.episode_seed(s.episodes + 1 + k),
+                              reset_options={"target": np.asarray(target)},
+                              distance_fn=self.distance, quiet=True)
+            near = np.flatnonzero(episode.distances <= s.threshold)
+            steps.append(int(near[0]) if len(near) else None)
+        reached = sum(n is not None and n <= reacher.SUCCESS_STEPS for n in steps)
+        run.summary_fields.update(test_steps=steps, test_reached=int(reached))
+        logger.info("held-out targets reached within %d steps: %d of %d",
+                    reacher.SUCCESS_STEPS, reached, len(steps))
+        return steps
+
+    def success(self, summary: Dict[str, Any]) -> bool:
+        reached = summary.get("test_reached")
+        return reached is not None and reached >= math.ceil(
+            SUCCESS_SHARE * self.settings.test_targets)
 
 
 class MultiReacherTask(reacher.ReacherTask):
@@ -120,54 +172,7 @@ class MultiReacherTask(reacher.ReacherTask):
 
         return build
 
-    def hooks(self, s: MultiReacherSettings, env) -> Dict[str, Any]:
-        train = self.targets(s, TRAIN_STREAM, s.training_targets)
-
-        def options(number: int) -> Optional[dict]:
-            return {"target": train[(number - 1) % len(train)]}
-
-        def success(summary: Dict[str, Any]) -> bool:
-            reached = summary.get("test_reached")
-            return reached is not None and reached >= math.ceil(
-                SUCCESS_SHARE * s.test_targets)
-
-        return dict(after_model_fit=after_model_fit(s), before_policy_search=schedule(s),
-                    success_fn=success, reset_options=options)
-
-    def prepare(self, exp: Experiment, s: MultiReacherSettings) -> None:
-        super().prepare(exp, s)
-        exp.summary_fields = {
-            "training_targets": self.targets(s, TRAIN_STREAM, s.training_targets).tolist(),
-            "test_targets": self.targets(s, TEST_STREAM, s.test_targets).tolist(),
-            "test_steps": None, "test_reached": None, **exp.summary_fields}
-
-    def run(self, exp: Experiment, s: MultiReacherSettings) -> Dict[str, Any]:
-        """The training episodes, then the test of the final policy on the held-out
-        targets (once the run is complete)."""
-        summary = exp.run()
-        if exp.complete and exp.summary_fields.get("test_steps") is None:
-            self.test(exp, s)
-            exp.save_progress()
-            summary = exp.summary()
-        return summary
-
-    def test(self, exp: Experiment, s: MultiReacherSettings) -> List[Optional[int]]:
-        """Run the agent's policy on every test target from the arm's start (seeds
-        beyond the run's episodes'); the steps to the target (None: not reached)."""
-        env, agent = exp.make_env(), exp.agent
-        steps: List[Optional[int]] = []
-        for k, target in enumerate(exp.summary_fields["test_targets"]):
-            episode = rollout(env, lambda x: agent.compute_action(x)[0], s.horizon,
-                              seed=exp.episode_seed(s.episodes + 1 + k),
-                              reset_options={"target": np.asarray(target)},
-                              distance_fn=exp.distance_fn, quiet=True)
-            near = np.flatnonzero(episode.distances <= s.threshold)
-            steps.append(int(near[0]) if len(near) else None)
-        reached = sum(n is not None and n <= reacher.SUCCESS_STEPS for n in steps)
-        exp.summary_fields.update(test_steps=steps, test_reached=int(reached))
-        logger.info("held-out targets reached within %d steps: %d of %d",
-                    reacher.SUCCESS_STEPS, reached, len(steps))
-        return steps
+    run_hooks = MultiReacherHooks
 
     def notes(self, summary: Dict[str, Any]) -> List[str]:
         return [f"\nheld-out targets reached within {reacher.SUCCESS_STEPS} steps: "
