@@ -46,8 +46,8 @@ from .validation import (check_entries, check_indices, check_matrix, check_non_n
                          check_positive_int)
 
 __all__ = ["HalfSpace", "Box", "Region", "OnMap", "ViolationPenalty", "horizon_risk",
-           "step_violations", "normal_tail", "constraint_config", "constraint_from_config",
-           "COMBINE"]
+           "step_violations", "violated_states", "normal_tail", "constraint_config",
+           "constraint_from_config", "COMBINE"]
 
 #: the ways of combining per-dimension or per-step probabilities
 COMBINE = ("union", "independent")
@@ -245,6 +245,13 @@ def step_violations(constraint, M, S) -> np.ndarray:
     S = np.asarray(S, dtype=np.float64)
     return np.array([float(constraint.violation(tf.constant(M[t:t + 1]), tf.constant(S[t])))
                      for t in range(len(M))])
+
+
+def violated_states(constraint, states) -> np.ndarray:
+    """Which of the known states ``states`` [T, D] violate ``constraint`` (each its
+    violation at a zero covariance, certain or impossible): a boolean array [T]."""
+    X = np.atleast_2d(np.asarray(states, dtype=np.float64))
+    return step_violations(constraint, X, np.zeros((len(X),) + X.shape[1:2] * 2)) > 0.5
 
 
 class ViolationPenalty(gpflow.base.Module):

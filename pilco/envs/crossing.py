@@ -45,14 +45,20 @@ class TwoCarsCrossing(gymnasium.Env):
         half_width: the crossing covers ``[-half_width, half_width]`` on both roads (1 m).
         max_episode_steps: the env's own horizon, or ``None`` (the registered id ends
             episodes with gymnasium's ``TimeLimit`` instead, 25 steps).
+        render_mode: ``None``: the cars are not drawn (gymnasium's argument, accepted so
+            that ``gymnasium.make`` can pass it).
     """
 
     metadata = {"render_modes": []}
 
     def __init__(self, *, dt: float = 0.5, mass: float = 1.0, friction: float = 0.001,
                  max_action: float = 0.4, start_std: float = 0.03, half_width: float = 1.0,
-                 max_episode_steps: int | None = None) -> None:
+                 max_episode_steps: int | None = None, render_mode: str | None = None) -> None:
         super().__init__()
+        if render_mode is not None:
+            raise ValueError(f"TwoCarsCrossing draws nothing: render_mode must be None, got "
+                             f"{render_mode!r}")
+        self.render_mode = None
         self.dt = check.real(dt, "dt", allow_zero=False)
         self.mass = check.real(mass, "mass", allow_zero=False)
         self.friction = check.real(friction, "friction", allow_zero=True)

@@ -15,6 +15,7 @@ one episode            :meth:`~RunHooks.reset_options`, :meth:`~RunHooks.watch`,
                        :meth:`~RunHooks.distance`, :meth:`~RunHooks.render`
 learning               :meth:`~RunHooks.model_data`, :meth:`~RunHooks.after_model_fit`,
                        :meth:`~RunHooks.before_policy_search`,
+                       :meth:`~RunHooks.after_policy_search`,
                        :meth:`~RunHooks.before_replayed_episode`
 scoring                :meth:`~RunHooks.success`
 =====================  ==============================================================
@@ -109,6 +110,12 @@ class RunHooks:
     def before_policy_search(self, run, number: int) -> None:
         """Before episode ``number``'s policy search (e.g. a cost that changes with the
         episode)."""
+
+    def after_policy_search(self, run, number: int, expected: float) -> None:
+        """After episode ``number``'s policy search, whose policy predicts the return
+        ``expected``: e.g. check it (Safe PILCO's risk) and search again, counted as the
+        episode's policy time. What it notes in ``run.policy_notes`` goes into the
+        episode's record (``extra_evaluations`` adds to its policy evaluations)."""
 
     def before_replayed_episode(self, run, view, number: int) -> None:
         """When the run's learning is replayed (:func:`pilco.diagnose.replay.replay_learning`),

@@ -197,9 +197,12 @@ def start_policy(exp, number: int) -> None:
 
 def learn_policy(exp, number: int) -> float:
     """The policy phase of learned episode ``number``: :func:`start_policy`, then
-    :func:`improve_policy`; returns the predicted return."""
+    :func:`improve_policy`, then the hooks' ``after_policy_search``; returns the predicted
+    return of the search."""
     start_policy(exp, number)
-    return improve_policy(exp, number)
+    expected = improve_policy(exp, number)
+    exp.hooks.after_policy_search(exp, number, expected)
+    return expected
 
 
 def predictions_before(exp) -> Dict[str, np.ndarray]:

@@ -20,12 +20,15 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import Any, Dict, List
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import numpy as np
 
 from ..constraints import COMBINE, ViolationPenalty, horizon_risk, step_violations
 from ..validation import check_positive_float, check_positive_int
 
-__all__ = ["SafeSearch", "predicted_risk", "safe_policy_search"]
+__all__ = ["SafeSearch", "predicted_risk", "safe_policy_search", "policy_parameters",
+           "set_policy_parameters"]
 
 logger = logging.getLogger(__name__)
 
@@ -73,10 +76,19 @@ def _penalty_of(reward) -> ViolationPenalty:
 
 def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: float = 1.5,
                        lower_by: float = 0.75, far_below: float = 0.25,
-                       rule: str = "independent", **optimize: Any) -> SafeSearch:
+                       rule: str = "independent", search: Optional[Callable[[], float]] = None,
+                       searched: Optional[float] = None,
+                       start: Optional[Tuple[List[np.ndarray], float]] = None,
+                       **optimize: Any) -> SafeSearch:
     """Search the agent's policy until its predicted risk is at most ``threshold`` (module
-    docstring); ``optimize``: keyword arguments of
-    :meth:`~pilco.models.PILCO.optimize_policy`. Returns a :class:`SafeSearch`."""
+    docstring); returns a :class:`SafeSearch`.
+
+    ``search``: one policy search, ``() -> expected return`` (default
+    :meth:`~pilco.models.PILCO.optimize_policy` with the keyword arguments ``optimize``).
+    ``searched``: the expected return of a search that already ran (a run loop's own): the
+    policy in place is checked first and counts as the first of ``attempts``; ``start``
+    is then ``(parameter values, predicted risk)`` of the policy that search started from
+    (the fallback), else the policy in place when called is the start."""
     threshold = check_positive_float(threshold, "threshold")
     if threshold >= 1.0:
         raise ValueError(f"threshold must be below 1 (a probability), got {threshold}")
@@ -88,14 +100,20 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
         raise ValueError("raise_by must be above 1, lower_by and far_below below 1")
     if rule not in COMBINE:
         raise ValueError(f"rule must be one of {COMBINE}, got {rule!r}")
+    if searched is None and start is not None:
+        raise ValueError("start is the policy a search already run started from: give "
+                         "searched (its expected return) with it")
     penalty = _penalty_of(agent.reward)
     constraint = penalty.constraint
-    start = [v.numpy() for v in agent.controller.trainable_variables]
-    start_risk = predicted_risk(agent, constraint, rule)
+    if start is None:
+        start = (policy_parameters(agent), predicted_risk(agent, constraint, rule))
+    if search is None:
+        def search() -> float:
+            return agent.optimize_policy(**optimize)
     tries: List[Dict[str, float]] = []
-    for _ in range(attempts):
+    for attempt in range(attempts):
         weight = float(penalty.weight.numpy())
-        value = agent.optimize_policy(**optimize)
+        value = float(searched) if attempt == 0 and searched is not None else search()
         risk = predicted_risk(agent, constraint, rule)
         tries.append({"weight": weight, "risk": risk, "expected_return": float(value)})
         if risk <= threshold:
@@ -103,12 +121,12 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
                 penalty.weight.assign(weight * lower_by)
             return SafeSearch(True, risk, False, float(penalty.weight.numpy()), tries)
         logger.info("policy predicted to violate the constraint with probability %.3g > "
-                    "%.3g: mu %.3g -> %.3g, searched again", risk, threshold, weight,
-                    weight * raise_by)
+                    "%.3g: mu %.3g -> %.3g%s", risk, threshold, weight, weight * raise_by,
+                    ", searched again" if attempt + 1 < attempts else "")
         penalty.weight.assign(weight * raise_by)
+    params, start_risk = start
     if start_risk <= threshold:
-        for v, x in zip(agent.controller.trainable_variables, start):
-            v.assign(x)
+        set_policy_parameters(agent, params)
         logger.warning("no policy below the risk threshold %.3g in %d searches: the policy "
                        "the search started from (risk %.3g) is kept", threshold, attempts,
                        start_risk)
@@ -118,3 +136,15 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
                    threshold, attempts, start_risk)
     return SafeSearch(False, float(tries[-1]["risk"]), False, float(penalty.weight.numpy()),
                       tries)
+
+
+def policy_parameters(agent) -> List[np.ndarray]:
+    """Copies of the values of the agent's policy parameters (its controller's trainable
+    variables), for :func:`set_policy_parameters`."""
+    return [np.array(v.numpy()) for v in agent.controller.trainable_variables]
+
+
+def set_policy_parameters(agent, values: List[np.ndarray]) -> None:
+    """Put back policy parameter values of :func:`policy_parameters`."""
+    for v, x in zip(agent.controller.trainable_variables, values):
+        v.assign(x)

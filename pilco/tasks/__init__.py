@@ -11,6 +11,7 @@ task                    where
 ``pendulum``            :mod:`pilco.tasks.pendulum`, the reference port's Pendulum-v1
 ``reacher_multi``       :mod:`pilco.tasks.reacher_multi`, one policy for any target
 ``gym``                 :mod:`pilco.tasks.gym`, any gymnasium environment by its id
+``cars``                :mod:`pilco.tasks.cars`, Safe PILCO's two cars at a crossing
 ======================  =============================================================
 
 :data:`TASKS` is the registry of the package's tasks: ``python -m pilco.tasks``, the seed
@@ -43,6 +44,7 @@ TASKS = {
     "pendulum": "pendulum:PENDULUM",
     "reacher_multi": "reacher_multi:REACHER_MULTI",
     "gym": "gym:GYM",
+    "cars": "cars:CARS",
 }
 
 

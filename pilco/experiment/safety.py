@@ -1,0 +1,133 @@
+"""Safe PILCO's loop: a learned policy runs on the system only when its predicted risk of
+violating a state constraint is below a threshold.
+
+:class:`SafeRun` is a :class:`~pilco.experiment.hooks.RunHooks` mixin. The agent's
+reward holds a :class:`pilco.constraints.ViolationPenalty` of weight ``mu`` beside the
+task's reward, so each policy search maximises the return minus ``mu`` times the risk.
+After the loop's policy search of every learned episode (``after_policy_search``) the
+policy's risk over the horizon is predicted; above the threshold ``mu`` is raised and the
+search repeated, at most ``attempts`` searches in all, after which the run keeps the policy
+of the episode before when it meets the threshold under the new model
+(:func:`pilco.models.safe.safe_policy_search`). When no policy meets it, the episode does
+**not** run the policy: it runs :attr:`Safety.safe_action` at every step (``watch``), and
+its record says so. Every learned episode's record holds ``safety`` (the predicted risk,
+``mu``, the searches, ``executed``, ``fallback``), and every episode's record ``violated``
+(some real state broke the constraint) and ``violation_steps``; the summary's ``safety``
+counts them.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Any, Dict, Optional, Sequence
+
+import numpy as np
+
+from ..constraints import COMBINE, violated_states
+from ..models.safe import policy_parameters, predicted_risk, safe_policy_search
+from .hooks import RunHooks
+from .learning import search_policy
+
+__all__ = ["Safety", "SafeRun"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class Safety:
+    """What :class:`SafeRun` keeps: ``constraint`` (a :mod:`pilco.constraints` object on
+    the raw state, the one the agent's ``ViolationPenalty`` holds), the ``threshold`` on
+    the predicted risk over the horizon (combined by ``rule``: ``"independent"``, Safe
+    PILCO's ``1 - Π(1 - p_t)``, or the ``"union"`` bound), at most ``attempts`` searches
+    per episode, ``mu`` raised by ``raise_by`` above the threshold and lowered by
+    ``lower_by`` below ``far_below`` times it, and ``safe_action`` [U], what an episode
+    runs when no policy is predicted safe (e.g. braking)."""
+
+    constraint: Any
+    threshold: float
+    safe_action: Sequence[float]
+    attempts: int = 3
+    rule: str = "independent"
+    raise_by: float = 1.5
+    lower_by: float = 0.75
+    far_below: float = 0.25
+
+    def __post_init__(self):
+        if not 0.0 < float(self.threshold) < 1.0:
+            raise ValueError(f"threshold must be a probability in (0, 1), got {self.threshold}")
+        if self.rule not in COMBINE:
+            raise ValueError(f"rule must be one of {COMBINE}, got {self.rule!r}")
+        if int(self.attempts) < 1:
+            raise ValueError(f"attempts must be at least 1, got {self.attempts}")
+        action = np.asarray(self.safe_action, dtype=np.float64).reshape(-1)
+        if action.size == 0 or not np.all(np.isfinite(action)):
+            raise ValueError(f"safe_action must be finite numbers, one per action, got "
+                             f"{self.safe_action!r}")
+
+
+class SafeRun(RunHooks):
+    """Safe PILCO's episode rule for hooks with a :attr:`safety` (module docstring)."""
+
+    safety: Safety
+    #: the policy the episode's search started from and its predicted risk
+    _start: Optional[tuple] = None
+
+    def before_policy_search(self, run, number: int) -> None:
+        super().before_policy_search(run, number)
+        agent = run.agent
+        self._start = (policy_parameters(agent),
+                       predicted_risk(agent, self.safety.constraint, self.safety.rule))
+
+    def after_policy_search(self, run, number: int, expected: float) -> None:
+        super().after_policy_search(run, number, expected)
+        safety, agent = self.safety, run.agent
+        extra = {"evaluations": 0}
+
+        def search() -> float:  # each further search adds the one before's evaluations
+            extra["evaluations"] += int(getattr(agent, "policy_evaluations", 0) or 0)
+            return search_policy(run, number, "policy (safe)")
+
+        result = safe_policy_search(
+            agent, safety.threshold, attempts=safety.attempts, raise_by=safety.raise_by,
+            lower_by=safety.lower_by, far_below=safety.far_below, rule=safety.rule,
+            search=search, searched=expected, start=self._start)
+        notes = run.policy_notes
+        notes["safety"] = dict(result.as_record(), executed=bool(result.safe),
+                               threshold=float(safety.threshold))
+        notes["extra_evaluations"] = notes.get("extra_evaluations", 0) + extra["evaluations"]
+        if not result.safe:
+            logger.warning("episode %d: no policy predicted safe (risk %.3g > %.3g): the "
+                           "episode runs the safe action %s", number, result.risk,
+                           safety.threshold, list(safety.safe_action))
+
+    def watch(self, run, number: int, policy):
+        policy = super().watch(run, number, policy)
+        if run.policy_notes.get("safety", {}).get("executed", True):
+            return policy
+        action = np.asarray(self.safety.safe_action, dtype=np.float64).reshape(-1)
+
+        def safe(x):
+            return action.copy()
+
+        return safe
+
+    def after_episode(self, run, number: int) -> None:
+        super().after_episode(run, number)
+        violated = violated_states(self.safety.constraint, run.episodes[-1].states)
+        record = run.records[-1]
+        record["violated"] = bool(violated.any())
+        record["violation_steps"] = int(violated.sum())
+        run.summary_fields["safety"] = safety_counts(run.records)
+        run.save_progress()
+
+
+def safety_counts(records) -> Dict[str, Any]:
+    """The run's safety in numbers: learned episodes, those whose policy ran
+    (``executed``), the executed ones that violated the constraint, the random ones that
+    did, and the predicted risks of the executed ones."""
+    learned = [r for r in records if not r["random"]]
+    executed = [r for r in learned if r.get("safety", {}).get("executed", True)]
+    return {"learned": len(learned), "executed": len(executed),
+            "executed_violated": sum(bool(r.get("violated")) for r in executed),
+            "random_violated": sum(bool(r.get("violated")) for r in records if r["random"]),
+            "executed_risks": [r["safety"]["risk"] for r in executed if "safety" in r]}

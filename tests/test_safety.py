@@ -1,0 +1,131 @@
+"""Safe PILCO's loop (:mod:`pilco.experiment.safety`): a policy predicted above the risk
+threshold is never run on the system, ``mu`` moves as the rule says, every episode records
+its predicted risk, whether it ran and whether it broke the constraint; and the two cars
+(``pilco run cars``) run through it."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pilco.constraints import HalfSpace, ViolationPenalty
+from pilco.experiment import Experiment, RunHooks
+from pilco.experiment.safety import SafeRun, Safety
+
+from test_experiment import LineEnv, config
+
+SAFE_ACTION = -0.25
+
+
+def line_agent(wall):
+    """A real PILCO agent on the line whose reward holds the penalty of ``wall``."""
+    def build(data, start_states):
+        from pilco.controllers import LinearController
+        from pilco.models import PILCO
+        from pilco.rewards import CombinedRewards, ExponentialReward
+
+        reward = CombinedRewards(1, [ExponentialReward(1, W=[[4.0]], t=[[1.0]]),
+                                     ViolationPenalty(wall, 1.0)])
+        return PILCO(data, LinearController(1, 1, max_action=0.5, seed=0), reward,
+                     horizon=4, m_init=[[0.0]], S_init=[[1e-3]])
+
+    return build
+
+
+class SafeLine(SafeRun):
+    """Safe PILCO's loop on the line with ``wall`` as its constraint."""
+
+    def __init__(self, wall, attempts=2):
+        self.build = line_agent(wall)
+        self.safety = Safety(wall, 0.1, [SAFE_ACTION], attempts=attempts)
+
+    def make_env(self, run):
+        return LineEnv()
+
+    def build_agent(self, data, start_states):
+        return self.build(data, start_states)
+
+
+def run_line(tmp_path, wall, episodes=3, attempts=2):
+    cfg = config(episodes=episodes, random_episodes=1, horizon=5, model_iters=10,
+                 policy_iters=3, random_action_scale=0.3)
+    exp = Experiment(cfg, str(tmp_path / "run"), SafeLine(wall, attempts))
+    return exp, exp.run()
+
+
+def test_a_policy_predicted_unsafe_is_never_executed(tmp_path):
+    """Planted: every state from the start on breaks ``x <= -5`` (the start is at 0), so
+    no policy can be safe: no learned episode runs its policy, each runs the safe action
+    at every step and says so, and each raises mu by 1.5 per search."""
+    wall = HalfSpace(1, [1.0], -5.0)
+    exp, summary = run_line(tmp_path, wall, episodes=3, attempts=2)
+    learned = [r for r in summary["episodes"] if not r["random"]]
+    assert len(learned) == 2
+    for record, episode in zip(learned, exp.episodes[1:]):
+        safety = record["safety"]
+        assert safety["executed"] is False and safety["risk"] > 0.99
+        assert [t["weight"] for t in safety["tries"]] == pytest.approx(
+            [safety["tries"][0]["weight"], 1.5 * safety["tries"][0]["weight"]])
+        np.testing.assert_array_equal(episode.actions, SAFE_ACTION)  # never the policy
+        assert record["violated"] and record["violation_steps"] == episode.steps + 1
+    assert learned[1]["safety"]["tries"][0]["weight"] == pytest.approx(1.5 ** 2)
+    counts = summary["safety"]
+    assert (counts["learned"], counts["executed"], counts["executed_violated"]) == (2, 0, 0)
+    # the records are saved as they are summarised
+    saved = json.load(open(exp.store.summary_path))
+    assert saved["safety"] == counts and saved["episodes"][1]["safety"]["executed"] is False
+
+
+def test_a_policy_predicted_safe_runs_and_mu_is_lowered(tmp_path):
+    """``x <= 100`` is never near: the policy's risk is ~0, so it runs (its actions are
+    the policy's, not the safe action) and mu is lowered by 0.75 after each search."""
+    wall = HalfSpace(1, [1.0], 100.0)
+    exp, summary = run_line(tmp_path, wall, episodes=3)
+    learned = [r for r in summary["episodes"] if not r["random"]]
+    for k, record in enumerate(learned):
+        assert record["safety"]["executed"] is True and record["safety"]["risk"] < 1e-6
+        assert len(record["safety"]["tries"]) == 1  # the loop's own search sufficed
+        assert record["safety"]["weight"] == pytest.approx(0.75 ** (k + 1))
+        assert not record["violated"]
+    assert not np.all(exp.episodes[-1].actions == SAFE_ACTION)
+    assert summary["safety"]["executed"] == 2
+
+
+def test_the_safety_settings_are_checked():
+    wall = HalfSpace(1, [1.0], 0.0)
+    for bad, match in (({"threshold": 1.0}, "threshold"), ({"threshold": 0.0}, "threshold"),
+                       ({"rule": "max"}, "rule"), ({"attempts": 0}, "attempts"),
+                       ({"safe_action": [np.nan]}, "safe_action")):
+        kw = {"constraint": wall, "threshold": 0.1, "safe_action": [0.0], **bad}
+        with pytest.raises(ValueError, match=match):
+            Safety(**kw)
+    assert issubclass(SafeRun, RunHooks)
+
+
+def test_the_two_cars_run_safe_pilco(tmp_path):
+    """A short cars run (2 random episodes, 2 learned with tiny searches): the learned
+    episodes record their risk and whether they ran, a run that ran none brakes, and
+    the summary counts them; bad settings are usage errors."""
+    from pilco.tasks.cars import CARS
+
+    out = str(tmp_path / "cars")
+    s = CARS.parse(["--output", out, "--episodes", "4", "--random-episodes", "2",
+                    "--policy-iters", "2", "--policy-restarts", "1", "--model-iters", "10",
+                    "--basis-functions", "5", "--quiet", "--no-figures", "--seed", "1"])
+    exp = CARS.experiment(s)
+    summary = CARS.run(exp, s)
+    exp.close()
+    learned = [r for r in summary["episodes"] if not r["random"]]
+    assert len(learned) == 2
+    for record, episode in zip(learned, exp.episodes[2:]):
+        assert 0.0 <= record["safety"]["risk"] <= 1.0
+        if not record["safety"]["executed"]:
+            np.testing.assert_array_equal(episode.actions, s.safe_action)
+            assert not record["violated"]  # braking from the start never reaches it
+    counts = summary["safety"]
+    assert counts["learned"] == 2 and counts["executed"] == sum(
+        r["safety"]["executed"] for r in learned)
+    for flags in (["--risk-threshold", "1.5"], ["--safe-action", "-0.3"]):
+        with pytest.raises(SystemExit):
+            CARS.parse(["--output", out + "-x", *flags])
