@@ -91,6 +91,10 @@ class HalfSpace:
         """The arguments that rebuild it (:func:`constraint_from_config`)."""
         return {"state_dim": self.state_dim, "a": self.a.numpy()[:, 0].tolist(), "b": self.b}
 
+    def breaks(self, X) -> np.ndarray:
+        """Whether each known state of ``X`` [N, D] breaks it (``a·x > b``): bool [N]."""
+        return np.asarray(X, dtype=np.float64) @ self.a.numpy()[:, 0] > self.b
+
     @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
     def violation(self, m, s):
         """``P(a·x > b)`` for x ~ N(m, s)."""
@@ -142,6 +146,11 @@ class Box:
                 "low": [_number(v) for v in self.low], "high": [_number(v) for v in self.high],
                 "combine": self.combine}
 
+    def breaks(self, X) -> np.ndarray:
+        """Whether each known state of ``X`` [N, D] is outside the box: bool [N]."""
+        Xd = np.asarray(X, dtype=np.float64)[:, list(self.dims)]
+        return np.any((Xd < self.low) | (Xd > self.high), axis=1)
+
     @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
     def violation(self, m, s):
         """The probability that x ~ N(m, s) leaves the box (by ``combine``)."""
@@ -182,6 +191,10 @@ class Region:
         self.state_dim, self.dims = self._box.state_dim, self._box.dims
         self.low, self.high, self.combine = low, high, combine
 
+    def breaks(self, X) -> np.ndarray:
+        """Whether each known state of ``X`` [N, D] is inside the region: bool [N]."""
+        return ~self._box.breaks(X)
+
     @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
     def violation(self, m, s):
         """The probability that x ~ N(m, s) is inside the region (by ``combine``)."""
@@ -221,6 +234,11 @@ class OnMap:
                 "constraint": constraint_config(self.constraint),
                 "c": self.c.numpy()[0].tolist()}
 
+    def breaks(self, X) -> np.ndarray:
+        """Whether each known state of ``X`` [N, D] breaks the constraint on ``A x + c``."""
+        Y = np.asarray(X, dtype=np.float64) @ self.A.numpy().T + self.c.numpy()
+        return self.constraint.breaks(Y)
+
     @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
     def violation(self, m, s):
         """The constraint's violation probability under the mapped Gaussian."""
@@ -248,9 +266,13 @@ def step_violations(constraint, M, S) -> np.ndarray:
 
 
 def violated_states(constraint, states) -> np.ndarray:
-    """Which of the known states ``states`` [T, D] violate ``constraint`` (each its
-    violation at a zero covariance, certain or impossible): a boolean array [T]."""
+    """Which of the known states ``states`` [T, D] violate ``constraint``: a boolean array
+    [T] (the constraint's ``breaks``, else its violation at a zero covariance, certain or
+    impossible)."""
     X = np.atleast_2d(np.asarray(states, dtype=np.float64))
+    breaks = getattr(constraint, "breaks", None)
+    if breaks is not None:
+        return np.asarray(breaks(X), dtype=bool)
     return step_violations(constraint, X, np.zeros((len(X),) + X.shape[1:2] * 2)) > 0.5
 
 

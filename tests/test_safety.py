@@ -129,3 +129,25 @@ def test_the_two_cars_run_safe_pilco(tmp_path):
     for flags in (["--risk-threshold", "1.5"], ["--safe-action", "-0.3"]):
         with pytest.raises(SystemExit):
             CARS.parse(["--output", out + "-x", *flags])
+    check_risk_against_samples(exp.agent)
+
+
+def check_risk_against_samples(agent):
+    """The moment-matched risk of a learned agent against trajectories sampled through its
+    GP dynamics (:func:`pilco.models.safe.sampled_risk`), for a wall ``x1 <= b`` placed k
+    predicted standard deviations beyond the predicted final position: far beyond it
+    neither says the car gets there, far before it both say it does, and in between they
+    agree within 0.2 (moment matching is an approximation: the sampled distribution is
+    not Gaussian, and the sampled risk may exceed even the union bound)."""
+    from pilco.models.safe import predicted_risk, sampled_risk
+
+    M, S = agent.predict_trajectory()
+    end, std = M[-1, 0], float(np.sqrt(S[-1, 0, 0]))
+    for k, low, high in ((-6.0, 0.95, 1.0), (0.5, 0.0, 1.0), (6.0, 0.0, 0.05)):
+        wall = HalfSpace(4, [1.0, 0.0, 0.0, 0.0], end + k * std)
+        sampled, se = sampled_risk(agent, wall, samples=300, seed=1)
+        predicted = predicted_risk(agent, wall, "independent")
+        assert low <= predicted <= high and low - 3 * se <= sampled <= high + 3 * se, (
+            k, predicted, sampled)
+        assert abs(sampled - predicted) <= 0.2, (k, predicted, sampled)
+        assert predicted_risk(agent, wall, "union") >= predicted - 1e-12

@@ -24,11 +24,12 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..constraints import COMBINE, ViolationPenalty, horizon_risk, step_violations
+from ..constraints import (COMBINE, ViolationPenalty, horizon_risk, step_violations,
+                           violated_states)
 from ..validation import check_positive_float, check_positive_int
 
-__all__ = ["SafeSearch", "predicted_risk", "safe_policy_search", "policy_parameters",
-           "set_policy_parameters"]
+__all__ = ["SafeSearch", "predicted_risk", "sampled_risk", "safe_policy_search",
+           "policy_parameters", "set_policy_parameters"]
 
 logger = logging.getLogger(__name__)
 
@@ -60,6 +61,34 @@ def predicted_risk(agent, constraint, rule: str = "independent") -> float:
     :meth:`~pilco.models.PILCO.predict_trajectory`)."""
     M, S = agent.predict_trajectory()
     return float(horizon_risk(step_violations(constraint, M, S)[1:], rule))
+
+
+def sampled_risk(agent, constraint, samples: int = 1000, seed: int = 0,
+                 horizon: Optional[int] = None) -> Tuple[float, float]:
+    """The share of ``samples`` trajectories drawn through the agent's model that violate
+    ``constraint`` at some step 1..H (``horizon``, default the agent's), and its standard
+    error: each starts from the start distribution ``N(m_init, S_init)`` (the first
+    task's), takes the policy's action at each sampled state and moves by a draw of the
+    dynamics GPs' predictive distribution there (:meth:`~pilco.models.PILCO.one_step_prediction`:
+    mean plus standard deviation times a standard normal, independent per step and
+    output). What the moment-matched :func:`predicted_risk` approximates, up to the
+    per-step independence of the draws."""
+    samples = check_positive_int(samples, "samples")
+    H = agent.horizon if horizon is None else check_positive_int(horizon, "horizon")
+    rng = np.random.default_rng(seed)
+    m = np.asarray(agent.m_init, dtype=np.float64)[0]
+    S = np.asarray(agent.S_init, dtype=np.float64)
+    S = S[0] if S.ndim == 3 else S
+    vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
+    x = m + rng.standard_normal((samples, len(m))) @ (vecs * np.sqrt(np.clip(vals, 0, None))).T
+    hit = np.zeros(samples, dtype=bool)
+    for _ in range(H):
+        u = agent.compute_action(x)
+        mean, var = agent.one_step_prediction(np.hstack([x, u]))
+        x = x + mean + np.sqrt(np.clip(var, 0.0, None)) * rng.standard_normal(x.shape)
+        hit |= violated_states(constraint, x)
+    share = float(hit.mean())
+    return share, float(np.sqrt(max(share * (1.0 - share), 1e-12) / samples))
 
 
 def _penalty_of(reward) -> ViolationPenalty:
