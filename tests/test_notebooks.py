@@ -33,6 +33,7 @@ EXPECTED_REQUIREMENTS = {
     "03_damaged_reacher.ipynb": ["mujoco", "gymnasium_robotics"],
     "04_success_rates.ipynb": [],
     "05_multi_target_reacher.ipynb": ["mujoco", "gymnasium_robotics"],
+    "06_safe_pilco.ipynb": [],
 }
 FAST_SWITCH = 'os.environ.get("PILCO_NOTEBOOK_FAST", "0") == "1"'
 

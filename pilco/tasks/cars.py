@@ -35,7 +35,7 @@ from .base import Task, TaskHooks
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
 
-__all__ = ["CarsSettings", "CarsTask", "CarsHooks", "CARS", "collision_region"]
+__all__ = ["CarsSettings", "CarsTask", "CarsHooks", "CARS", "collision_region", "HALF_WIDTH"]
 
 #: the crossing's half width on both roads [m] (the env's default)
 HALF_WIDTH = 1.0

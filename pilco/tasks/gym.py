@@ -50,11 +50,11 @@ PRESETS: Dict[str, Dict[str, Any]] = {
                               horizon=100, planning_horizon=40, basis_functions=10,
                               success="survive", success_steps=100),
     # TorchRL's example: 200 random steps in one rollout that resets whenever the pole
-    # falls (about 20 episodes of 5-13 steps), a start N(0, 1e-3 I), horizon 40, then 3
-    # learning epochs, each evaluated on 100 steps with the policy's mean action (and its
-    # transitions added). Here: 20 random episodes, each learned episode is the
-    # evaluation. Not carried over: its 100 Adam steps per epoch (the policy search is
-    # this project's), and its data cap (the last 350 transitions).
+    # falls (episodes of 3-23 steps), a start N(0, 1e-3 I), horizon 40, then 3 learning
+    # epochs, each evaluated on 100 steps with the policy's mean action (and its
+    # transitions added). Here: 20 random episodes (about 110-150 random steps), each
+    # learned episode is the evaluation. Not carried over: its 100 Adam steps per epoch
+    # (the policy search is this project's), and its data cap (the last 350 transitions).
     "torchrl": dict(env="InvertedPendulum-v5", random_episodes=20, episodes=23, horizon=100,
                     planning_horizon=40, basis_functions=10, start_var=1e-3,
                     success="survive", success_steps=100),
