@@ -151,3 +151,24 @@ def check_risk_against_samples(agent):
             k, predicted, sampled)
         assert abs(sampled - predicted) <= 0.2, (k, predicted, sampled)
         assert predicted_risk(agent, wall, "union") >= predicted - 1e-12
+
+
+def test_the_cars_example_runs_as_a_script(tmp_path):
+    """``examples/cars.py`` with tiny settings: exit 0, the safety counts printed and the
+    summary written."""
+    import os
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = tmp_path / "run"
+    proc = subprocess.run(
+        [sys.executable, os.path.join(root, "examples", "cars.py"), "--output", str(out),
+         "--episodes", "3", "--random-episodes", "2", "--policy-iters", "1",
+         "--policy-restarts", "1", "--model-iters", "5", "--basis-functions", "3",
+         "--quiet", "--no-figures"], capture_output=True, text=True, timeout=600, cwd=root,
+        env=dict(os.environ, PYTHONPATH=root))  # this checkout's pilco
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "learned episodes 1, executed" in proc.stdout
+    summary = json.load(open(out / "summary.json"))
+    assert summary["task"] == "cars" and summary["safety"]["learned"] == 1
