@@ -79,9 +79,10 @@ EPISODE_FIELDS = ("episode", "random", "steps", "min_distance", "final_distance"
                   "steps_to_target")
 #: summary fields kept per run when present: the adaptation's damage and recovery, the
 #: multi-target reacher's held-out test (steps per test target, how many within the rule),
-#: whether a run held its first success to the end and which learned episodes were solved
+#: whether a run held its first success to the end and which learned episodes were solved,
+#: Safe PILCO's counts of executed and violating episodes
 TASK_FIELDS = ("healthy_reached_at_episode", "damage_at_episode", "episodes_to_recover",
-               "test_steps", "test_reached", "held_for_good", "solved_episodes")
+               "test_steps", "test_reached", "held_for_good", "solved_episodes", "safety")
 RUN_FIELDS = ("setting", "seed", "success", "solved", "solved_at_episode", "seconds",
               "episodes", "distances")
 

@@ -161,6 +161,21 @@ def test_adaptation_adds_episodes_to_recover():
     assert r == {"q1": 2.0, "median": 3.0, "q3": None, "recovered": 2, "not_recovered": 1}
 
 
+def test_safe_runs_add_their_safety_counts():
+    runs_ = [summary(0, safety={"learned": 5, "executed": 4, "executed_violated": 0,
+                                "random_violated": 4, "executed_risks": [0.03, 0.04, 0.05, 0.06]}),
+             summary(1, safety={"learned": 5, "executed": 2, "executed_violated": 1,
+                                "random_violated": 5, "executed_risks": [0.01, 0.02]})]
+    r = aggregate.aggregate_setting(runs_)["safety"]
+    assert (r["learned"], r["executed"], r["executed_violated"], r["random_violated"]) == (
+        10, 6, 1, 9)
+    assert r["executed_risk"]["max"] == 0.06 and r["executed_risk"]["median"] == 0.035
+    assert "safety" not in aggregate.aggregate_setting([summary(2)])
+    table = aggregate.format_table({"mu=50": aggregate.aggregate_setting(runs_)})
+    assert ("safety: 6 of 10 learned episodes ran, 1 of them broke the constraint (random "
+            "episodes: 9); predicted risk of those that ran: median 0.035, max 0.060") in table
+
+
 def test_solved_by_episode_and_table():
     runs_ = [summary(0, solved_at=2), summary(1, solved_at=3), summary(2)]
     assert aggregate.solved_by_episode(runs_, 4) == pytest.approx([0.0, 1 / 3, 2 / 3, 2 / 3])

@@ -139,9 +139,12 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
     {q1, median, q3}, min_distance: {q1, median, q3}}``, ``seconds_per_run`` ``{median,
     max}``, ``provenance`` (:func:`provenance_counts`), ``held_for_good`` (how many runs,
     when the summaries say it: solved and solved again in every later learned episode),
-    and ``episodes_to_recover`` like
+    ``episodes_to_recover`` like
     ``episodes_to_solve`` when the summaries have it (a task whose runs recover from a
-    change, such as damage, report it).
+    change, such as damage, report it), and ``safety`` when they have it (Safe PILCO's
+    runs, :mod:`pilco.experiment.safety`): the learned episodes, those whose policy ran
+    (``executed``), the executed ones that broke the constraint, the random ones that did,
+    and the quartiles and maximum of the executed ones' predicted risks.
     """
     finished = len(summaries)
     if runs is None:
@@ -177,6 +180,13 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
     }
     if any("held_for_good" in s for s in summaries):
         result["held_for_good"] = sum(1 for s in summaries if s.get("held_for_good"))
+    counts = [s["safety"] for s in summaries if isinstance(s.get("safety"), Mapping)]
+    if counts:
+        risks = [float(r) for c in counts for r in c.get("executed_risks", ())]
+        result["safety"] = {
+            **{key: sum(int(c.get(key, 0)) for c in counts)
+               for key in ("learned", "executed", "executed_violated", "random_violated")},
+            "executed_risk": {**quartiles(risks), "max": max(risks) if risks else None}}
     if any("episodes_to_recover" in s for s in summaries):
         recover = [math.inf if s.get("episodes_to_recover") is None
                    else float(s["episodes_to_recover"]) for s in summaries]
@@ -245,4 +255,12 @@ def format_table(results: Mapping[str, Mapping[str, Any]], title: str = "") -> s
             f"{_num(last['steps_to_target']['median'], 'g'):>7}"
             f"{_num(last['final_distance']['median']):>12}"
             f"{_num(r['seconds_per_run']['median'], '.0f'):>8}")
+        safety = r.get("safety")
+        if safety:  # Safe PILCO's runs: which learned policies ran, which broke the constraint
+            lines.append(
+                f"{'':<28}safety: {safety['executed']} of {safety['learned']} learned "
+                f"episodes ran, {safety['executed_violated']} of them broke the constraint "
+                f"(random episodes: {safety['random_violated']}); predicted risk of those "
+                f"that ran: median {_num(safety['executed_risk']['median'], '.3f')}, max "
+                f"{_num(safety['executed_risk']['max'], '.3f')}")
     return "\n".join(lines)
