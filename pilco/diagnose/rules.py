@@ -51,7 +51,7 @@ already helps, and how the run was reconstructed.
 """
 from __future__ import annotations
 
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Tuple
 
 from .geometry import slope_ratio
 from .thresholds import Thresholds
@@ -61,6 +61,22 @@ __all__ = ["VERDICTS", "verdict", "notes"]
 #: every verdict label :func:`verdict` can give
 VERDICTS = ("solved", "objective: cost flat", "model", "objective", "optimiser",
             "objective: optimum short of the target")
+
+
+def _model_coverage(facts: Dict[str, Any], t: Thresholds) -> Tuple[bool, str]:
+    """Whether the model's predictions were wrong (its one-step coverage below the
+    thresholds, or the open loop off by more than the success distance at the real closest
+    approach), and the sentence that says so."""
+    cov, worst = float(facts["coverage"]), float(facts["worst_dim_coverage"])
+    one_step_wrong = t.one_step_wrong(cov, worst)
+    open_loop_wrong = bool(facts.get("open_loop_wrong"))
+    text = (f"one-step coverage {cov:.0%} overall, {worst:.0%} in the worst dimension "
+            f"({'below' if one_step_wrong else 'not below'} {t.coverage:.0%} / "
+            f"{t.coverage_dim:.0%})")
+    if facts.get("open_loop_wrong") is not None:
+        text += ("; the open loop is off by " + ("more" if open_loop_wrong else "less")
+                 + " than the success distance at the real closest approach")
+    return one_step_wrong or open_loop_wrong, text
 
 
 def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dict[str, Any]:
@@ -87,16 +103,7 @@ def verdict(facts: Dict[str, Any], thresholds: Thresholds = Thresholds()) -> Dic
     of :data:`VERDICTS`.
     """
     t = thresholds
-    cov, worst = float(facts["coverage"]), float(facts["worst_dim_coverage"])
-    one_step_wrong = t.one_step_wrong(cov, worst)
-    open_loop_wrong = bool(facts.get("open_loop_wrong"))
-    wrong = one_step_wrong or open_loop_wrong
-    cov_text = (f"one-step coverage {cov:.0%} overall, {worst:.0%} in the worst dimension "
-                f"({'below' if one_step_wrong else 'not below'} {t.coverage:.0%} / "
-                f"{t.coverage_dim:.0%})")
-    if facts.get("open_loop_wrong") is not None:
-        cov_text += ("; the open loop is off by " + ("more" if open_loop_wrong else "less")
-                     + " than the success distance at the real closest approach")
+    wrong, cov_text = _model_coverage(facts, t)
     model_or_objective = "model" if wrong else "objective"
     gain, run_cost = facts.get("gain"), facts.get("run_cost")
     better = gain is not None and gain >= t.gain_needed(run_cost)
