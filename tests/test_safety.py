@@ -172,3 +172,37 @@ def test_the_cars_example_runs_as_a_script(tmp_path):
     assert "learned episodes 1, executed" in proc.stdout
     summary = json.load(open(out / "summary.json"))
     assert summary["task"] == "cars" and summary["safety"]["learned"] == 1
+
+
+def test_the_cart_pole_on_a_finite_track(tmp_path):
+    """``--track-bound B`` records every episode's crossing of ``|x| <= B`` (without the
+    loop every learned policy runs); ``--safe`` adds Safe PILCO's loop (the learned
+    episodes record their risk; one that did not run applied no force); ``--safe``
+    without a track is a usage error; without a track nothing is recorded."""
+    from pilco.tasks.cartpole import CARTPOLE
+
+    tiny = ["--episodes", "3", "--horizon", "8", "--basis-functions", "3", "--policy-iters",
+            "2", "--model-iters", "10", "--policy-restarts", "1", "--quiet", "--no-figures",
+            "--no-render", "--seed", "1"]
+    for flags, safe in ((["--track-bound", "0.05"], False),
+                        (["--track-bound", "0.05", "--safe"], True)):
+        out = str(tmp_path / f"safe-{safe}")
+        s = CARTPOLE.parse(["--output", out, *tiny, *flags])
+        exp = CARTPOLE.experiment(s)
+        summary = CARTPOLE.run(exp, s)
+        exp.close()
+        for record, episode in zip(summary["episodes"], exp.episodes):
+            assert record["violated"] == bool(np.any(np.abs(episode.states[:, 0]) > 0.05))
+        learned = [r for r in summary["episodes"] if not r["random"]]
+        assert ("safety" in learned[0]) == safe
+        counts = summary["safety"]
+        assert counts["learned"] == 2
+        if not safe:
+            assert counts["executed"] == 2
+        for record, episode in zip(summary["episodes"], exp.episodes):
+            if safe and not record["random"] and not record["safety"]["executed"]:
+                np.testing.assert_array_equal(episode.actions, 0.0)
+    with pytest.raises(SystemExit):
+        CARTPOLE.parse(["--output", str(tmp_path / "x"), "--safe"])
+    plain = CARTPOLE.parse(["--output", str(tmp_path / "plain")])
+    assert plain.track_bound is None and not plain.safe

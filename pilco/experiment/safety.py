@@ -28,7 +28,7 @@ from ..models.safe import policy_parameters, predicted_risk, safe_policy_search
 from .hooks import RunHooks
 from .learning import search_policy
 
-__all__ = ["Safety", "SafeRun"]
+__all__ = ["Safety", "SafeRun", "RecordsViolations", "safety_counts"]
 
 logger = logging.getLogger(__name__)
 
@@ -65,10 +65,33 @@ class Safety:
                              f"{self.safe_action!r}")
 
 
-class SafeRun(RunHooks):
+class RecordsViolations(RunHooks):
+    """A RunHooks mixin that records, after every episode, whether its real states broke
+    :attr:`constraint` (the records' ``violated`` and ``violation_steps``; the summary's
+    ``safety`` counts, :func:`safety_counts`): the measurement of a run without Safe
+    PILCO's loop beside one with it."""
+
+    constraint: Any
+
+    def after_episode(self, run, number: int) -> None:
+        super().after_episode(run, number)
+        violated = violated_states(self.constraint, run.episodes[-1].states)
+        record = run.records[-1]
+        record["violated"] = bool(violated.any())
+        record["violation_steps"] = int(violated.sum())
+        run.summary_fields["safety"] = safety_counts(run.records)
+        run.save_progress()
+
+
+class SafeRun(RecordsViolations):
     """Safe PILCO's episode rule for hooks with a :attr:`safety` (module docstring)."""
 
     safety: Safety
+
+    @property
+    def constraint(self):
+        """The constraint of :attr:`safety` (what :class:`RecordsViolations` checks)."""
+        return self.safety.constraint
     #: the policy the episode's search started from and its predicted risk
     _start: Optional[tuple] = None
 
@@ -110,15 +133,6 @@ class SafeRun(RunHooks):
             return action.copy()
 
         return safe
-
-    def after_episode(self, run, number: int) -> None:
-        super().after_episode(run, number)
-        violated = violated_states(self.safety.constraint, run.episodes[-1].states)
-        record = run.records[-1]
-        record["violated"] = bool(violated.any())
-        record["violation_steps"] = int(violated.sum())
-        run.summary_fields["safety"] = safety_counts(run.records)
-        run.save_progress()
 
 
 def safety_counts(records) -> Dict[str, Any]:

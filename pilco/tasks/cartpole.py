@@ -53,20 +53,29 @@ The run is "solved" when, in a learned episode, the tip stays within 0.1 m of th
 for the last 10 steps; "success" is *held for good*: solved in a learned episode and in
 every learned episode after it, to the last (a controller that works once and then drops
 the pole is not a success).
+
+A finite track (``--track-bound B``, as the real rigs have): every episode records whether
+the cart left ``|x| <= B`` (records' ``violated``, the summary's ``safety``), and with
+``--safe`` Safe PILCO's loop keeps it there (:mod:`pilco.experiment.safety`): the objective
+is the return minus ``--mu`` times the probability of leaving, a policy runs only when its
+predicted risk over the horizon is below ``--risk-threshold``, and an episode without one
+applies no force.
 """
 from __future__ import annotations
 
-from typing import List
+from typing import List, Optional
 
 import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
+from ..experiment.safety import RecordsViolations, SafeRun, Safety
 from ..experiment.scoring import held_for_good_rule
 from .base import Task, TaskHooks
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
 
-__all__ = ["CartPoleSettings", "CartPoleTask", "CARTPOLE", "init_policy_from_start", "start_draw"]
+__all__ = ["CartPoleSettings", "CartPoleTask", "CARTPOLE", "init_policy_from_start", "start_draw",
+           "track", "CartPoleHooks", "TrackHooks", "SafeCartPoleHooks"]
 
 
 @task_settings(episodes=8, horizon=40, basis_functions=10, policy_iters=150,
@@ -93,6 +102,19 @@ class CartPoleSettings(RunSettings):
         "start", "initial RBF policy and the restarts' policies: 'start' draws the centers "
         "from the start distribution as the MATLAB release does; 'random' from N(0, I)",
         choices=("start", "random"))
+    track_bound: Optional[float] = setting(
+        None, "half-length of the track [m]: every episode records whether the cart left "
+        "|x| <= B", kind=positive_float, unset="no track", group="track")
+    safe: bool = setting(False, "with --track-bound: Safe PILCO's loop keeps the cart on "
+                         "the track (a policy runs only when its predicted risk of leaving "
+                         "it is below --risk-threshold)", group="track")
+    risk_threshold: float = setting(0.05, "--safe: largest predicted probability of leaving "
+                                    "the track over the horizon for a policy to run",
+                                    kind=positive_float, group="track")
+    mu: float = setting(50.0, "--safe: starting weight of the risk in the policy objective",
+                        kind=positive_float, group="track")
+    safe_attempts: int = setting(3, "--safe: policy searches per episode before giving up "
+                                 "on a safe policy", kind=positive_int, group="track")
 
 
 def start_draw(start_std: float):
@@ -116,6 +138,32 @@ class CartPoleHooks(TaskHooks):
 
     def success(self, summary) -> bool:
         return held_for_good_rule(self.config)(summary)
+
+
+def track(bound: float):
+    """The track: the cart's position ``x`` (state dimension 0) within ``[-bound, bound]``."""
+    from ..constraints import Box
+
+    return Box(4, [0], [-bound], [bound])
+
+
+class TrackHooks(RecordsViolations, CartPoleHooks):
+    """The cart-pole on a finite track without Safe PILCO's loop: every episode records
+    whether the cart left it."""
+
+    def __init__(self, task, s: CartPoleSettings, config: ExperimentConfig, env):
+        super().__init__(task, s, config, env)
+        self.constraint = track(s.track_bound)
+
+
+class SafeCartPoleHooks(SafeRun, CartPoleHooks):
+    """The cart-pole on a finite track with Safe PILCO's loop (no force when no policy is
+    predicted safe)."""
+
+    def __init__(self, task, s: CartPoleSettings, config: ExperimentConfig, env):
+        super().__init__(task, s, config, env)
+        self.safety = Safety(track(s.track_bound), s.risk_threshold, [0.0],
+                             attempts=s.safe_attempts)
 
 
 class CartPoleTask(Task):
@@ -154,15 +202,36 @@ class CartPoleTask(Task):
                 # with the agent (a resumed run restarts as the run did)
                 controller.randomizer = start_draw(s.start_std)
                 controller.randomize(seed=s.seed)
-            return PILCO(data, controller,
-                         CartPoleReward(pendulum_length=0.5, width=s.cost_width),
-                         horizon=s.horizon, m_init=np.zeros((1, 4)),
+            reward = CartPoleReward(pendulum_length=0.5, width=s.cost_width)
+            if s.safe:  # the return minus mu times the probability of leaving the track
+                from ..constraints import ViolationPenalty
+                from ..rewards import CombinedRewards
+
+                reward = CombinedRewards(4, [reward, ViolationPenalty(track(s.track_bound),
+                                                                      s.mu)])
+            return PILCO(data, controller, reward, horizon=s.horizon, m_init=np.zeros((1, 4)),
                          S_init=s.start_std ** 2 * np.eye(4), angle_indices=[3],
                          policy_input_noise=s.policy_input_noise == "on")
 
         return build
 
     run_hooks = CartPoleHooks
+
+    def hooks(self, s: CartPoleSettings, config: ExperimentConfig, env):
+        """:class:`CartPoleHooks`; on a finite track :class:`TrackHooks`, or with
+        ``--safe`` :class:`SafeCartPoleHooks`."""
+        if s.track_bound is None:
+            return super().hooks(s, config, env)
+        kind = SafeCartPoleHooks if s.safe else TrackHooks
+        return kind(self, s, config, env)
+
+    def check(self, s: CartPoleSettings) -> CartPoleSettings:
+        if s.safe and s.track_bound is None:
+            raise ValueError("--safe keeps the cart on a finite track: give --track-bound")
+        if s.risk_threshold >= 1.0:
+            raise ValueError(f"--risk-threshold must be below 1 (a probability), got "
+                             f"{s.risk_threshold}")
+        return s
 
     def figures(self, exp: Experiment, s: CartPoleSettings) -> List[str]:
         """Distances, predicted vs real cost, one- and multi-step predictions, the final
