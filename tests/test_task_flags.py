@@ -145,6 +145,8 @@ def test_the_reacher_arms_stop_a_stalled_policy_search_and_the_others_do_not(tmp
     ({"start_std": -0.1}, "start_std must be a number >= 0, got -0.1"),
     ({"hold_steps": 2.5}, "hold_steps must be a whole number >= 1, got 2.5"),
     ({"squash": "tanh"}, "squash must be 'sat' or 'sin', got 'tanh'"),
+    ({"risk_threshold": 1.0}, "risk_threshold must be a number between 0 and 1, got 1.0"),
+    ({"risk_threshold": 0.0}, "risk_threshold must be a number between 0 and 1, got 0.0"),
     ({"cost_width": float("nan")}, "cost_width must be a number > 0"),
     # the loop's, with None where None is the default
     ({"policy_start_scale": -1.0}, "policy_start_scale must be a number >= 0 or None"),

@@ -20,7 +20,7 @@ import contextlib
 import functools
 import logging
 import time
-from typing import Any, Dict, Iterator, Optional, Tuple
+from typing import Any, Dict, Iterator, Optional
 
 import numpy as np
 
@@ -46,8 +46,6 @@ def _warn_unless_portable() -> None:
     message = portability_warning()
     if message:
         logger.warning(message)
-
-Data = Tuple[np.ndarray, np.ndarray]
 
 
 class Experiment(RunRecord):

@@ -24,7 +24,8 @@ from typing import Any, Dict, Optional, Sequence
 import numpy as np
 
 from ..constraints import COMBINE, violated_states
-from ..models.safe import policy_parameters, predicted_risk, safe_policy_search
+from ..models.safe import predicted_risk, safe_policy_search
+from ..snapshots import snapshot
 from .hooks import RunHooks
 from .learning import search_policy
 
@@ -88,18 +89,19 @@ class SafeRun(RecordsViolations):
 
     safety: Safety
 
+    #: the policy the episode's search started from and its predicted risk
+    _start: Optional[tuple] = None
+
     @property
     def constraint(self):
         """The constraint of :attr:`safety` (what :class:`RecordsViolations` checks)."""
         return self.safety.constraint
-    #: the policy the episode's search started from and its predicted risk
-    _start: Optional[tuple] = None
 
     def before_policy_search(self, run, number: int) -> None:
         super().before_policy_search(run, number)
         agent = run.agent
-        self._start = (policy_parameters(agent),
-                       predicted_risk(agent, self.safety.constraint, self.safety.rule))
+        self._start = (snapshot(agent.controller),
+                       predicted_risk(agent, self.constraint, self.safety.rule))
 
     def after_policy_search(self, run, number: int, expected: float) -> None:
         super().after_policy_search(run, number, expected)

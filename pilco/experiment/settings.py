@@ -17,7 +17,8 @@ import math
 from typing import Any, Callable, Dict, Optional, Sequence
 
 __all__ = ["setting", "task_settings", "field_meta", "check_declared", "whole", "positive_float",
-           "non_negative_float", "positive_int", "non_negative_int", "optional_float", "level_name"]
+           "non_negative_float", "positive_int", "non_negative_int", "probability",
+           "optional_float", "level_name"]
 
 #: the metadata keys of a :func:`setting` field
 _META = "pilco_flag"
@@ -38,11 +39,13 @@ def _number(kind: type, test: Callable[[float], bool], what: str) -> Callable[[s
     return parse
 
 
-#: command-line readers of values that must be > 0, >= 0, an integer >= 1 or >= 0
+#: command-line readers of values that must be > 0, >= 0, an integer >= 1 or >= 0, and of a
+#: probability strictly between 0 and 1
 positive_float = _number(float, lambda v: v > 0, "positive")
 non_negative_float = _number(float, lambda v: v >= 0, "zero or positive")
 positive_int = _number(int, lambda v: v >= 1, "at least 1")
 non_negative_int = _number(int, lambda v: v >= 0, "at least 0")
+probability = _number(float, lambda v: 0 < v < 1, "between 0 and 1")
 
 
 def level_name(text: str) -> str:
@@ -117,7 +120,8 @@ def whole(value: Any, minimum: int) -> bool:
 #: the least value of each whole-number and number kind
 _WHOLE = {positive_int: 1, non_negative_int: 0}
 _NUMBER = {positive_float: (lambda v: v > 0, "a number > 0"),
-           non_negative_float: (lambda v: v >= 0, "a number >= 0")}
+           non_negative_float: (lambda v: v >= 0, "a number >= 0"),
+           probability: (lambda v: 0 < v < 1, "a number between 0 and 1")}
 
 
 def check_declared(settings: Any) -> None:

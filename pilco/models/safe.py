@@ -26,10 +26,10 @@ import numpy as np
 
 from ..constraints import (COMBINE, ViolationPenalty, horizon_risk, step_violations,
                            violated_states)
+from ..snapshots import restore, snapshot
 from ..validation import check_positive_float, check_positive_int
 
-__all__ = ["SafeSearch", "predicted_risk", "sampled_risk", "safe_policy_search",
-           "policy_parameters", "set_policy_parameters"]
+__all__ = ["SafeSearch", "predicted_risk", "sampled_risk", "safe_policy_search"]
 
 logger = logging.getLogger(__name__)
 
@@ -107,7 +107,7 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
                        lower_by: float = 0.75, far_below: float = 0.25,
                        rule: str = "independent", search: Optional[Callable[[], float]] = None,
                        searched: Optional[float] = None,
-                       start: Optional[Tuple[List[np.ndarray], float]] = None,
+                       start: Optional[Tuple[Dict[str, np.ndarray], float]] = None,
                        **optimize: Any) -> SafeSearch:
     """Search the agent's policy until its predicted risk is at most ``threshold`` (module
     docstring); returns a :class:`SafeSearch`.
@@ -116,8 +116,9 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
     :meth:`~pilco.models.PILCO.optimize_policy` with the keyword arguments ``optimize``).
     ``searched``: the expected return of a search that already ran (a run loop's own): the
     policy in place is checked first and counts as the first of ``attempts``; ``start``
-    is then ``(parameter values, predicted risk)`` of the policy that search started from
-    (the fallback), else the policy in place when called is the start."""
+    is then ``(pilco.snapshots.snapshot of the controller, predicted risk)`` of the policy
+    that search started from (the fallback), else the policy in place when called is the
+    start."""
     threshold = check_positive_float(threshold, "threshold")
     if threshold >= 1.0:
         raise ValueError(f"threshold must be below 1 (a probability), got {threshold}")
@@ -135,7 +136,7 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
     penalty = _penalty_of(agent.reward)
     constraint = penalty.constraint
     if start is None:
-        start = (policy_parameters(agent), predicted_risk(agent, constraint, rule))
+        start = (snapshot(agent.controller), predicted_risk(agent, constraint, rule))
     if search is None:
         def search() -> float:
             return agent.optimize_policy(**optimize)
@@ -155,7 +156,7 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
         penalty.weight.assign(weight * raise_by)
     params, start_risk = start
     if start_risk <= threshold:
-        set_policy_parameters(agent, params)
+        restore(agent.controller, params)
         logger.warning("no policy below the risk threshold %.3g in %d searches: the policy "
                        "the search started from (risk %.3g) is kept", threshold, attempts,
                        start_risk)
@@ -166,14 +167,3 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
     return SafeSearch(False, float(tries[-1]["risk"]), False, float(penalty.weight.numpy()),
                       tries)
 
-
-def policy_parameters(agent) -> List[np.ndarray]:
-    """Copies of the values of the agent's policy parameters (its controller's trainable
-    variables), for :func:`set_policy_parameters`."""
-    return [np.array(v.numpy()) for v in agent.controller.trainable_variables]
-
-
-def set_policy_parameters(agent, values: List[np.ndarray]) -> None:
-    """Put back policy parameter values of :func:`policy_parameters`."""
-    for v, x in zip(agent.controller.trainable_variables, values):
-        v.assign(x)

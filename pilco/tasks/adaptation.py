@@ -284,6 +284,7 @@ class AdaptationSchedule(RunHooks):
         stop_stuck_joints(run, s, first)
 
     def after_episode(self, run, number: int) -> None:
+        super().after_episode(run, number)
         first = run.summary_fields["damage_at_episode"]
         if first is not None and number >= first:
             self._after_damaged_episode(run)
@@ -292,7 +293,8 @@ class AdaptationSchedule(RunHooks):
     def watch(self, run, number: int, policy):
         """The first damaged episode's :class:`ReplanWhenStuck` (with
         ``--replan-stuck-joints`` and ``--stop-stuck-joints``, while no joint was judged
-        yet); otherwise the policy itself."""
+        yet); otherwise the policy of the hooks it is mixed with."""
+        policy = super().watch(run, number, policy)
         s, first = self.settings, run.summary_fields["damage_at_episode"]
         if (first is not None and number >= first and s.replan_stuck_joints
                 and s.stop_stuck_joints and run.summary_fields.get("stuck_joints") is None):

@@ -44,7 +44,7 @@ class TaskHooks(RunHooks):
     the subclass as its :attr:`Task.run_hooks`."""
 
     def __init__(self, task: "Task", settings: RunSettings, config: ExperimentConfig, env):
-        self.task, self.settings, self.config, self.env = task, settings, config, env
+        self.settings, self.config, self.env = settings, config, env
         self._build = task.agent_builder(settings, env)
 
     def make_env(self, run):

@@ -30,9 +30,9 @@ from typing import Any, Dict, List
 import numpy as np
 
 from ..experiment import ExperimentConfig
-from ..experiment.safety import SafeRun, Safety
+from ..experiment.safety import SafeRun
 from .base import Task, TaskHooks
-from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
+from .settings import (SafetySettings, non_negative_float, positive_float, setting,
                        task_settings)
 
 __all__ = ["CarsSettings", "CarsTask", "CarsHooks", "CARS", "collision_region", "HALF_WIDTH"]
@@ -44,25 +44,12 @@ HALF_WIDTH = 1.0
 @task_settings(episodes=10, random_episodes=5, horizon=25, basis_functions=40,
                policy_iters=20, policy_restarts=2, model_iters=100,
                output="runs/cars-seed{seed}")
-class CarsSettings(RunSettings):
+class CarsSettings(SafetySettings):
     """The two cars' settings (Safe PILCO's published script, except that an unsafe
     policy never runs)."""
 
     max_action: float = setting(0.2, "the policy's acceleration bound [m/s²] (the env "
                                 "allows 0.4)", kind=positive_float)
-    risk_threshold: float = setting(0.1, "largest predicted probability of a collision "
-                                    "over the horizon for a policy to run", kind=positive_float,
-                                    group="safety")
-    mu: float = setting(50.0, "starting weight of the risk in the policy objective "
-                        "(return minus mu times the risk)", kind=positive_float,
-                        group="safety")
-    safe_attempts: int = setting(3, "policy searches per episode before giving up on a "
-                                 "safe policy (mu x1.5 after each unsafe one)",
-                                 kind=positive_int, group="safety")
-    risk_rule: str = setting("independent", "how the steps' probabilities combine: "
-                             "'independent' (1 - prod(1 - p_t), Safe PILCO's) or 'union' "
-                             "(sum, a bound)", choices=("independent", "union"),
-                             group="safety")
     region_rule: str = setting("bound", "the probability of both cars in the crossing: "
                                "'bound' (the smaller of the two cars' own, never below the "
                                "truth) or 'independent' (their product)",
@@ -89,8 +76,7 @@ class CarsHooks(SafeRun, TaskHooks):
 
     def __init__(self, task, s: CarsSettings, config: ExperimentConfig, env):
         super().__init__(task, s, config, env)
-        self.safety = Safety(collision_region(s.region_rule), s.risk_threshold,
-                             [s.safe_action], attempts=s.safe_attempts, rule=s.risk_rule)
+        self.safety = s.safety(collision_region(s.region_rule), [s.safe_action])
 
     def success(self, summary: Dict[str, Any]) -> bool:
         if not summary["episodes"]:
@@ -109,9 +95,6 @@ class CarsTask(Task):
     run_hooks = CarsHooks
 
     def check(self, s: CarsSettings) -> CarsSettings:
-        if s.risk_threshold >= 1.0:
-            raise ValueError(f"--risk-threshold must be below 1 (a probability), got "
-                             f"{s.risk_threshold}")
         if abs(s.safe_action) > s.max_action:
             raise ValueError(f"--safe-action {s.safe_action} is beyond the policy's bound "
                              f"--max-action {s.max_action}")

@@ -68,10 +68,10 @@ from typing import List, Optional
 import numpy as np
 
 from ..experiment import Experiment, ExperimentConfig
-from ..experiment.safety import RecordsViolations, SafeRun, Safety
+from ..experiment.safety import RecordsViolations, SafeRun
 from ..experiment.scoring import held_for_good_rule
 from .base import Task, TaskHooks
-from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
+from .settings import (SafetySettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
 
 __all__ = ["CartPoleSettings", "CartPoleTask", "CARTPOLE", "init_policy_from_start", "start_draw",
@@ -82,9 +82,11 @@ __all__ = ["CartPoleSettings", "CartPoleTask", "CARTPOLE", "init_policy_from_sta
                model_iters=300, output="runs/cartpole-seed{seed}", policy_optimizer="BFGS",
                policy_min_rel_improvement=0.003, model_min_rel_improvement=5e-4,
                policy_restarts=2, policy_restart_when="unsolved", policy_restart_from=5,
-               policy_restart_step=1, policy_leave_repeat=1.0, policy_start_scale=2.0)
-class CartPoleSettings(RunSettings):
-    """The cart-pole's settings (the MATLAB release's defaults)."""
+               policy_restart_step=1, policy_leave_repeat=1.0, policy_start_scale=2.0,
+               risk_threshold=0.05)
+class CartPoleSettings(SafetySettings):
+    """The cart-pole's settings (the MATLAB release's defaults; the safety settings act
+    with ``--safe`` only)."""
 
     max_force: float = setting(10.0, "force bound [N]", kind=positive_float)
     cost_width: float = setting(0.25, "width [m] of the saturating cost on the tip distance",
@@ -108,13 +110,6 @@ class CartPoleSettings(RunSettings):
     safe: bool = setting(False, "with --track-bound: Safe PILCO's loop keeps the cart on "
                          "the track (a policy runs only when its predicted risk of leaving "
                          "it is below --risk-threshold)", group="track")
-    risk_threshold: float = setting(0.05, "--safe: largest predicted probability of leaving "
-                                    "the track over the horizon for a policy to run",
-                                    kind=positive_float, group="track")
-    mu: float = setting(50.0, "--safe: starting weight of the risk in the policy objective",
-                        kind=positive_float, group="track")
-    safe_attempts: int = setting(3, "--safe: policy searches per episode before giving up "
-                                 "on a safe policy", kind=positive_int, group="track")
 
 
 def start_draw(start_std: float):
@@ -162,8 +157,7 @@ class SafeCartPoleHooks(SafeRun, CartPoleHooks):
 
     def __init__(self, task, s: CartPoleSettings, config: ExperimentConfig, env):
         super().__init__(task, s, config, env)
-        self.safety = Safety(track(s.track_bound), s.risk_threshold, [0.0],
-                             attempts=s.safe_attempts)
+        self.safety = s.safety(track(s.track_bound), [0.0])
 
 
 class CartPoleTask(Task):
@@ -228,9 +222,6 @@ class CartPoleTask(Task):
     def check(self, s: CartPoleSettings) -> CartPoleSettings:
         if s.safe and s.track_bound is None:
             raise ValueError("--safe keeps the cart on a finite track: give --track-bound")
-        if s.risk_threshold >= 1.0:
-            raise ValueError(f"--risk-threshold must be below 1 (a probability), got "
-                             f"{s.risk_threshold}")
         return s
 
     def figures(self, exp: Experiment, s: CartPoleSettings) -> List[str]:

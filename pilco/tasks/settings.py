@@ -26,12 +26,12 @@ from typing import Any, Dict, Iterable, Mapping, Optional, Sequence, Type, TypeV
 from ..experiment.config import LoopSettings
 from ..experiment.settings import (field_meta, level_name, non_negative_float,
                                    non_negative_int, optional_float, positive_float,
-                                   positive_int, setting, task_settings)
+                                   positive_int, probability, setting, task_settings)
 
-__all__ = ["setting", "task_settings", "RunSettings", "build_parser", "parse_settings",
-           "settings_from_dict", "settings_to_dict", "saved_settings",
+__all__ = ["setting", "task_settings", "RunSettings", "SafetySettings", "build_parser",
+           "parse_settings", "settings_from_dict", "settings_to_dict", "saved_settings",
            "positive_float", "non_negative_float", "positive_int", "non_negative_int",
-           "optional_float"]
+           "probability", "optional_float"]
 
 S = TypeVar("S", bound="RunSettings")
 
@@ -53,6 +53,34 @@ class RunSettings(LoopSettings):
                                     "still win", kind=str, group="experiment")
     basis_functions: int = setting(10, "RBF policy basis functions", kind=positive_int,
                                    group="learning")
+
+
+@task_settings()
+class SafetySettings(RunSettings):
+    """The settings of a task with Safe PILCO's loop (:mod:`pilco.experiment.safety`):
+    the risk threshold, the risk's starting weight, the searches per episode and how the
+    steps' probabilities combine."""
+
+    risk_threshold: float = setting(0.1, "largest predicted probability of breaking the "
+                                    "constraint over the horizon for a policy to run",
+                                    kind=probability, group="safety")
+    mu: float = setting(50.0, "starting weight of the risk in the policy objective (return "
+                        "minus mu times the risk)", kind=positive_float, group="safety")
+    safe_attempts: int = setting(3, "policy searches per episode before giving up on a safe "
+                                 "policy (mu x1.5 after each unsafe one)", kind=positive_int,
+                                 group="safety")
+    risk_rule: str = setting("independent", "how the steps' probabilities combine: "
+                             "'independent' (1 - prod(1 - p_t), Safe PILCO's) or 'union' "
+                             "(sum, a bound)", choices=("independent", "union"),
+                             group="safety")
+
+    def safety(self, constraint, safe_action: Sequence[float]):
+        """The :class:`~pilco.experiment.safety.Safety` of these settings for
+        ``constraint``, running ``safe_action`` when no policy is predicted safe."""
+        from ..experiment.safety import Safety
+
+        return Safety(constraint, self.risk_threshold, list(safe_action),
+                      attempts=self.safe_attempts, rule=self.risk_rule)
 
 
 def _flag_fields(cls: type) -> Iterable[dataclasses.Field]:
