@@ -88,6 +88,9 @@ def test_a_policy_predicted_safe_runs_and_mu_is_lowered(tmp_path):
         assert len(record["safety"]["tries"]) == 1  # the loop's own search sufficed
         assert record["safety"]["weight"] == pytest.approx(0.75 ** (k + 1))
         assert not record["violated"]
+        # the risk recorded before the episode is the one the loop checked
+        assert record["predicted_risk"]["independent"] == pytest.approx(
+            record["safety"]["risk"], abs=1e-12)
     assert not np.all(exp.episodes[-1].actions == SAFE_ACTION)
     assert summary["safety"]["executed"] == 2
 
@@ -194,6 +197,11 @@ def test_the_cart_pole_on_a_finite_track(tmp_path):
         for record, episode in zip(summary["episodes"], exp.episodes):
             assert record["violated"] == bool(np.any(np.abs(episode.states[:, 0]) > 0.05))
         learned = [r for r in summary["episodes"] if not r["random"]]
+        for record in learned:  # every learned policy's predicted risk, both rules
+            risk = record["predicted_risk"]
+            assert 0.0 <= risk["independent"] <= risk["union"] + 1e-12
+            assert risk["union"] <= 1.0
+        assert "predicted_risk" not in summary["episodes"][0]  # a random episode
         assert ("safety" in learned[0]) == safe
         counts = summary["safety"]
         assert counts["learned"] == 2

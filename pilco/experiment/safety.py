@@ -23,7 +23,7 @@ from typing import Any, Dict, Optional, Sequence
 
 import numpy as np
 
-from ..constraints import COMBINE, violated_states
+from ..constraints import COMBINE, horizon_risk, step_violations, violated_states
 from ..models.safe import predicted_risk, safe_policy_search
 from ..snapshots import snapshot
 from .hooks import RunHooks
@@ -69,10 +69,21 @@ class Safety:
 class RecordsViolations(RunHooks):
     """A RunHooks mixin that records, after every episode, whether its real states broke
     :attr:`constraint` (the records' ``violated`` and ``violation_steps``; the summary's
-    ``safety`` counts, :func:`safety_counts`): the measurement of a run without Safe
-    PILCO's loop beside one with it."""
+    ``safety`` counts, :func:`safety_counts`), and before every learned episode the
+    predicted risk of its policy under both combination rules (the record's
+    ``predicted_risk``, ``{"independent": p, "union": q}``): the measurement of a run
+    without Safe PILCO's loop beside one with it, and what a calibration of the predicted
+    risk against real violations reads."""
 
     constraint: Any
+
+    def watch(self, run, number: int, policy):
+        policy = super().watch(run, number, policy)
+        M, S = run.agent.predict_trajectory()
+        p = step_violations(self.constraint, M, S)[1:]
+        run.policy_notes["predicted_risk"] = {rule: float(horizon_risk(p, rule))
+                                              for rule in COMBINE}
+        return policy
 
     def after_episode(self, run, number: int) -> None:
         super().after_episode(run, number)
