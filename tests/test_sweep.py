@@ -176,6 +176,56 @@ def test_safe_runs_add_their_safety_counts():
             "episodes: 9); predicted risk of those that ran: median 0.035, max 0.060") in table
 
 
+def risk_records(pairs, executed=True):
+    """Learned episodes' records with ``predicted_risk`` (both rules: union = 1.5 x the
+    product, capped) and ``violated``; one random episode first."""
+    base = {"final_distance": 1.0, "min_distance": 0.9, "steps_to_target": None}
+    records = [{**base, "random": True, "violated": True}]
+    for risk, violated in pairs:
+        record = {**base, "random": False, "violated": violated,
+                  "predicted_risk": {"independent": risk, "union": min(1.0, 1.5 * risk)}}
+        if executed is not None:
+            record["safety"] = {"executed": executed}
+        records.append(record)
+    return records
+
+
+def test_risk_calibration_bins_the_executed_episodes():
+    """Executed learned episodes are binned by predicted risk (bins [low, high), the last
+    closed); random episodes and episodes whose policy did not run are left out; the
+    rate and its Wilson interval are the bin's own."""
+    a = summary(0, episodes=4)
+    a["episodes"] = risk_records([(0.0, False), (0.004, False), (0.03, True), (1.0, True)])
+    b = summary(1, episodes=3)
+    b["episodes"] = risk_records([(0.002, True), (0.6, False)], executed=None)  # no loop
+    b["episodes"] += risk_records([(0.003, True)], executed=False)[1:]  # braked: left out
+    bins = aggregate.risk_calibration([a, b])
+    assert [(x["low"], x["high"], x["episodes"], x["violated"]) for x in bins] == [
+        (0.0, 0.01, 3, 1), (0.01, 0.05, 1, 1), (0.5, 0.8, 1, 0), (0.95, 1.0, 1, 1)]
+    assert bins[0]["rate"] == pytest.approx(1 / 3)
+    assert bins[0]["mean_risk"] == pytest.approx(0.002)
+    assert bins[0]["ci95"] == pytest.approx(list(aggregate.wilson_interval(1, 3)))
+    union = aggregate.risk_calibration([a, b], "union")
+    assert [x["episodes"] for x in union] == [3, 1, 1, 1]  # 0.045 still below 0.05
+    assert aggregate.risk_calibration([summary(2)]) == []
+    with pytest.raises(ValueError, match="increasing"):
+        aggregate.risk_calibration([a], edges=[0.0, 0.5, 0.5])
+    a["safety"] = {"learned": 4, "executed": 4, "executed_violated": 2,
+                   "random_violated": 1, "executed_risks": []}
+    r = aggregate.aggregate_setting([a])["safety"]["calibration"]
+    assert r["independent"] == aggregate.risk_calibration([a])
+
+
+def test_the_risk_calibration_figure(tmp_path):
+    a = summary(0, episodes=3)
+    a["episodes"] = risk_records([(0.02, False), (0.9, True)])
+    path = figures.risk_calibration_figure({"safe": [a]}, str(tmp_path / "cal.png"))
+    assert path and os.path.getsize(path) > 0
+    # no run records a predicted risk: no figure
+    assert figures.risk_calibration_figure({"a": [summary(0)]}, str(tmp_path / "x.png")) is None
+    assert not (tmp_path / "x.png").exists()
+
+
 def test_solved_by_episode_and_table():
     runs_ = [summary(0, solved_at=2), summary(1, solved_at=3), summary(2)]
     assert aggregate.solved_by_episode(runs_, 4) == pytest.approx([0.0, 1 / 3, 2 / 3, 2 / 3])

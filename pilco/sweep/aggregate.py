@@ -20,7 +20,7 @@ import math
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
 __all__ = ["WILSON_Z95", "wilson_interval", "quantile", "quartiles", "run_success",
-           "solved_in_episode",
+           "solved_in_episode", "RISK_BINS", "risk_calibration",
            "aggregate_setting", "provenance_counts", "solved_by_episode", "format_table"]
 
 #: the standard normal's 97.5 % quantile: a two-sided 95 % interval
@@ -124,6 +124,47 @@ def solved_in_episode(summaries: Sequence[Mapping[str, Any]], episodes: int
             for k in range(1, episodes + 1)]
 
 
+#: the edges of the predicted-risk bins of :func:`risk_calibration`: fine near 0, where a
+#: threshold lies, and near 1
+RISK_BINS = (0.0, 0.01, 0.05, 0.1, 0.2, 0.5, 0.8, 0.95, 1.0)
+
+
+def risk_calibration(summaries: Sequence[Mapping[str, Any]], rule: str = "independent",
+                     edges: Sequence[float] = RISK_BINS) -> List[Dict[str, Any]]:
+    """The predicted risk of the learned episodes whose policy ran against how often they
+    really broke the constraint: the episodes' records with ``predicted_risk[rule]`` and
+    ``violated`` (runs on a constraint, :mod:`pilco.experiment.safety`), binned by that
+    risk (bin ``[low, high)``, the last one closed). One entry per non-empty bin:
+    ``low``, ``high``, ``episodes``, ``violated``, ``rate`` (violated / episodes),
+    ``ci95`` (Wilson) and ``mean_risk`` (the bin's mean predicted risk). A calibrated
+    prediction has ``rate`` near ``mean_risk``; a conservative one below it."""
+    edges = [float(e) for e in edges]
+    if len(edges) < 2 or any(b <= a for a, b in zip(edges, edges[1:])):
+        raise ValueError(f"edges must be at least two increasing numbers, got {edges}")
+    bins: List[List[tuple]] = [[] for _ in edges[1:]]
+    for summary in summaries:
+        for record in summary.get("episodes") or ():
+            risk = (record.get("predicted_risk") or {}).get(rule)
+            if (record.get("random") or risk is None or "violated" not in record
+                    or not record.get("safety", {}).get("executed", True)):
+                continue
+            k = next((i for i, high in enumerate(edges[1:]) if risk < high), None)
+            if k is None and risk <= edges[-1]:
+                k = len(bins) - 1
+            if k is not None and risk >= edges[0]:
+                bins[k].append((float(risk), bool(record["violated"])))
+    out = []
+    for (low, high), members in zip(zip(edges, edges[1:]), bins):
+        if not members:
+            continue
+        violated = sum(v for _, v in members)
+        out.append({"low": low, "high": high, "episodes": len(members), "violated": violated,
+                    "rate": violated / len(members),
+                    "ci95": list(wilson_interval(violated, len(members))),
+                    "mean_risk": sum(r for r, _ in members) / len(members)})
+    return out
+
+
 def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[int] = None,
                       failed: int = 0, not_run: int = 0) -> Dict[str, Any]:
     """The aggregate of one setting from its finished runs' ``summaries``.
@@ -144,7 +185,8 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
     change, such as damage, report it), and ``safety`` when they have it (Safe PILCO's
     runs, :mod:`pilco.experiment.safety`): the learned episodes, those whose policy ran
     (``executed``), the executed ones that broke the constraint, the random ones that did,
-    and the quartiles and maximum of the executed ones' predicted risks.
+    and the quartiles and maximum of the executed ones' predicted risks; with the records'
+    ``predicted_risk``, their ``calibration`` per rule (:func:`risk_calibration`).
     """
     finished = len(summaries)
     if runs is None:
@@ -187,6 +229,10 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
             **{key: sum(int(c.get(key, 0)) for c in counts)
                for key in ("learned", "executed", "executed_violated", "random_violated")},
             "executed_risk": {**quartiles(risks), "max": max(risks) if risks else None}}
+        calibration = {rule: risk_calibration(summaries, rule)
+                       for rule in ("independent", "union")}
+        if any(calibration.values()):
+            result["safety"]["calibration"] = calibration
     if any("episodes_to_recover" in s for s in summaries):
         recover = [math.inf if s.get("episodes_to_recover") is None
                    else float(s["episodes_to_recover"]) for s in summaries]

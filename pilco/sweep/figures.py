@@ -4,7 +4,11 @@
   line per setting;
 * ``distance_bands.png``: per step, the median and the quartile band over runs of the
   distance to the target, one colour per episode, one panel per setting. It needs the
-  per-step ``distances`` of the run summaries and is skipped (with a log line) without.
+  per-step ``distances`` of the run summaries and is skipped (with a log line) without;
+* ``risk_calibration.png``: for runs on a constraint whose episodes record their
+  policy's predicted risk (:mod:`pilco.experiment.safety`), the share of the executed
+  learned episodes that broke it against their predicted risk, binned, one panel per
+  combination rule (drawn only for such runs).
 """
 from __future__ import annotations
 
@@ -15,9 +19,10 @@ from typing import Any, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from .aggregate import solved_by_episode, solved_in_episode
+from .aggregate import risk_calibration, solved_by_episode, solved_in_episode
 
-__all__ = ["success_rate_figure", "distance_bands_figure", "distance_quartiles"]
+__all__ = ["success_rate_figure", "distance_bands_figure", "distance_quartiles",
+           "risk_calibration_figure"]
 
 logger = logging.getLogger(__name__)
 
@@ -125,6 +130,52 @@ def distance_bands_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], 
             ax.grid(alpha=0.3)
             ax.legend(fontsize="x-small", ncol=2)
         axes[-1, 0].set_xlabel("step")
+        if title:
+            fig.suptitle(title)
+    finally:
+        _save_and_close(plt, fig, path)
+    return path
+
+
+def risk_calibration_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]], path: str,
+                            title: str = "") -> Optional[str]:
+    """Draw, for ``{setting: [summary, ...]}``, the observed violation rate of the executed
+    learned episodes (Wilson 95 % interval) against their mean predicted risk per bin of
+    :func:`~pilco.sweep.aggregate.risk_calibration`, one panel per rule (Safe PILCO's
+    ``independent`` product and the ``union`` bound), the diagonal for reference; points
+    below it are conservative predictions. Returns ``path``, or None when no run records
+    a predicted risk (nothing drawn, nothing logged: most tasks have no constraint)."""
+    rules = ("independent", "union")
+    table = {label: {rule: risk_calibration(runs, rule) for rule in rules}
+             for label, runs in summaries.items()}
+    table = {k: v for k, v in table.items() if any(v.values())}
+    if not table:
+        return None
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(rules), figsize=(9.6, 4.2), squeeze=False, sharey=True)
+    try:
+        for ax, rule in zip(axes[0], rules):
+            ax.plot([0, 1], [0, 1], color="grey", linewidth=0.8, linestyle=":")
+            for label, per_rule in table.items():
+                bins = per_rule[rule]
+                if not bins:
+                    continue
+                x = np.array([b["mean_risk"] for b in bins])
+                y = np.array([b["rate"] for b in bins])
+                ci = np.array([b["ci95"] for b in bins]).T
+                n = sum(b["episodes"] for b in bins)
+                ax.errorbar(x, y, yerr=np.abs(ci - y), marker="o", capsize=3,
+                            label=f"{label} ({n} episodes)")
+                for b in bins:
+                    ax.annotate(str(b["episodes"]), (b["mean_risk"], b["rate"]),
+                                textcoords="offset points", xytext=(4, 4), fontsize="x-small")
+            ax.set_xlim(-0.02, 1.02)
+            ax.set_ylim(-0.02, 1.02)
+            ax.set_xlabel(f"predicted risk ({rule}), bin mean")
+            ax.set_title(f"rule: {rule}", fontsize="medium")
+            ax.grid(alpha=0.3)
+        axes[0, 0].set_ylabel("episodes that broke the constraint")
+        axes[0, 0].legend(fontsize="x-small")
         if title:
             fig.suptitle(title)
     finally:

@@ -80,5 +80,8 @@ def write_report(args: argparse.Namespace, specs: Sequence[RunSpec],
                                     title=title)
         figures.distance_bands_figure(per_setting, os.path.join(output, "distance_bands.png"),
                                       title=title)
+        figures.risk_calibration_figure(per_setting,
+                                        os.path.join(output, "risk_calibration.png"),
+                                        title=title)
     logger.info("results in %s", os.path.join(output, "sweep.json"))
     return report
