@@ -265,7 +265,7 @@ def save_all(exp, out: str, title: str = "", state_dims: Sequence[int] = (0, 1, 
     ``final_episode.gif`` / ``final_episode_strip.png`` when frames were rendered.
     A figure that fails is logged and skipped. Returns the written paths.
     """
-    from .experiment.scoring import saturating_cost
+    from .experiment.scoring import episode_costs
 
     names = list(state_names) if state_names is not None else [f"x[{d}]" for d in state_dims]
     written: List[str] = []
@@ -288,7 +288,7 @@ def save_all(exp, out: str, title: str = "", state_dims: Sequence[int] = (0, 1, 
         i = with_pred[-1]
         attempt(plot_cost_prediction, 1.0 - preds[i]["pred_reward"],
                 preds[i]["pred_reward_var"],
-                saturating_cost(eps[i].distances, exp.config.cost_width),
+                episode_costs(eps[i], exp.config),
                 os.path.join(out, "cost_prediction.png"),
                 title=f"{title} — episode {i + 1}: predicted vs real cost".strip(" —"))
         attempt(plot_multi_step, preds[i]["pred_mean"], preds[i]["pred_var"], eps[i].states,

@@ -169,6 +169,30 @@ def test_a_resumed_run_keeps_the_factors_per_output(damaged_run):
         exp.summary_fields["output_disagreement"]
 
 
+def test_a_run_saved_before_task_state_resumes_with_its_state(damaged_run):
+    """Older versions wrote the data state as fields of progress.json's own (and
+    ``train_from_episode`` under ``extra``): a resume reads them into ``task_state``,
+    without the store knowing a task's names; every field today's runs write is known."""
+    import json
+
+    from pilco.experiment.store import PROGRESS_FIELDS, progress_record
+
+    exp = damaged_run
+    exp.task_state["train_from_episode"] = 2
+    exp.save_progress()
+    assert set(progress_record(exp)) <= PROGRESS_FIELDS
+    path = exp.store.path("progress.json")
+    progress = json.load(open(path))
+    state = progress.pop("task_state")
+    assert state["older_noise_scale"] == 100.0
+    train_from = state.pop("train_from_episode")
+    assert train_from == 2
+    progress.update(state, extra={"train_from_episode": train_from})
+    json.dump(progress, open(path, "w"))
+    resumed = Experiment.resume(exp.directory, exp.config, PlaneHooks(build))
+    assert resumed.task_state == {**state, "train_from_episode": train_from}
+
+
 @pytest.mark.parametrize("episode, restarts, stop", [(3, 1, False), (4, 2, False),
                                                      (4, 1, True)])
 def test_replaying_a_damaged_episode_redoes_the_damage(tmp_path, episode, restarts, stop):

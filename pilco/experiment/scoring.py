@@ -10,7 +10,7 @@ from .config import ExperimentConfig
 from .episode import Episode
 from .provenance import provenance
 
-__all__ = ["PHASES", "saturating_cost", "distances_solved", "episode_solved",
+__all__ = ["PHASES", "saturating_cost", "episode_costs", "distances_solved", "episode_solved",
            "solved_episodes", "held_for_good", "held_for_good_rule",
            "solved_in_last_episode", "episode_record", "summarise"]
 
@@ -22,6 +22,13 @@ def saturating_cost(distance, width: float) -> np.ndarray:
     """PILCO's saturating cost ``1 - exp(-d^2 / (2 width^2))`` of distances ``[...]``."""
     d = np.asarray(distance, dtype=np.float64)
     return 1.0 - np.exp(-(d ** 2) / (2.0 * float(width) ** 2))
+
+
+def episode_costs(episode: Episode, config: ExperimentConfig) -> np.ndarray:
+    """The summary's cost of each state of ``episode``: the saturating cost of its task
+    distance with the run's ``cost_width``, ``[T+1]`` (the record's ``cost`` sums steps
+    1..T)."""
+    return saturating_cost(episode.distances, config.cost_width)
 
 
 def episode_solved(episode: Episode, config: ExperimentConfig) -> bool:
@@ -93,7 +100,7 @@ def episode_record(episode: Episode, number: int, seconds: Dict[str, float],
     threshold (or None), seconds per phase."""
     d = episode.distances
     within = np.nonzero(d[1:] < config.success_threshold)[0]
-    cost = float(np.sum(saturating_cost(d[1:], config.cost_width)))
+    cost = float(np.sum(episode_costs(episode, config)[1:]))
     return {
         "episode": int(number),
         "random": bool(episode.random),

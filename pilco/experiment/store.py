@@ -175,10 +175,12 @@ def progress_record(exp) -> Dict[str, Any]:
     }
 
 
-#: fields of progress.json that older versions wrote for the task state (now in
-#: ``task_state``), read into it on resume
-LEGACY_TASK_STATE = ("train_from_episode", "older_noise_scale", "older_before_episode",
-                     "inert_actions", "inert_from_episode")
+#: the fields :func:`progress_record` writes (and ``extra``, where older versions kept
+#: a task's fields and summary entries): any other field of a saved progress.json is a
+#: task's state as versions before ``task_state`` wrote it, read into it on resume
+PROGRESS_FIELDS = frozenset(("config", "settings", "episodes_done", "records", "seconds",
+                             "cpu_seconds", "wall_seconds", "task_state", "summary_fields",
+                             "interrupted", "complete", "agent_saved", "extra"))
 
 
 def restore_progress(exp, progress: Dict[str, Any]) -> None:
@@ -192,10 +194,9 @@ def restore_progress(exp, progress: Dict[str, Any]) -> None:
     exp.cpu_seconds = {int(k): v for k, v in progress.get("cpu_seconds", {}).items()}
     legacy = progress.get("extra", {})
     exp.task_state = dict(progress.get("task_state", {}))
-    # files of older versions kept the task state in fields of their own
-    for key in LEGACY_TASK_STATE:
-        if key in progress:
-            exp.task_state.setdefault(key, progress[key])
-    if "train_from_episode" in legacy:
-        exp.task_state.setdefault("train_from_episode", legacy["train_from_episode"])
+    # older versions kept a task's state in fields of their own, or under "extra"
+    older = {k: v for k, v in progress.items() if k not in PROGRESS_FIELDS}
+    older.update((k, v) for k, v in legacy.items() if k != "summary")
+    for key, value in older.items():
+        exp.task_state.setdefault(key, value)
     exp.summary_fields = dict(progress.get("summary_fields", legacy.get("summary", {})))

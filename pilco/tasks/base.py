@@ -7,8 +7,8 @@ calls into (:class:`TaskHooks`, a :class:`~pilco.experiment.hooks.RunHooks`), th
 figures. The settings are handed down as one typed object;
 nothing below reads the command line. :meth:`Task.main` is the whole command::
 
-    settings = task.parse(argv)         # flags, --preset, --resume
-    exp = task.experiment(settings)     # new run, or the saved one
+    settings = task.parse(argv)         # flags, --preset, --resume (nothing else)
+    exp = task.experiment(settings)     # logging, threads; the new run, or the saved one
     summary = task.run(exp, settings)   # the paper's Algorithm 1 (or the task's loop)
     return task.finish(exp, summary, settings)  # tables, figures, exit status
 """
@@ -120,25 +120,32 @@ class Task:
 
     def parse(self, argv: Optional[Sequence[str]] = None) -> RunSettings:
         """The settings of command line ``argv`` (``--resume`` restores the saved ones,
-        :func:`~pilco.tasks.settings.parse_settings`), checked by :meth:`check`; sets up
-        logging at ``--log-level`` and the TensorFlow threads."""
-        from ..runtime import configure_logging, configure_threads, use_xla_cache
-
+        :func:`~pilco.tasks.settings.parse_settings`), checked by :meth:`check`. A usage
+        error prints the usage and exits (status 2), as ``--help`` does; nothing else
+        happens here (the process's set-up is :meth:`set_up`, done by
+        :meth:`experiment`)."""
         try:  # --help and argparse's own usage errors exit inside; the checks raise
-            settings = self.read_settings(argv, exit_on_error=True)
+            return self.read_settings(argv, exit_on_error=True)
         except ValueError as err:
             self.parser().error(str(err))
+
+    @staticmethod
+    def set_up(settings: RunSettings) -> None:
+        """The process's set-up for a run of ``settings``: logging at ``--log-level``,
+        TensorFlow's threads (:func:`pilco.runtime.configure_threads`) and, with
+        ``--policy-compiler xla``, XLA's compilation cache. :meth:`experiment` calls it
+        before anything runs on TensorFlow."""
+        from ..runtime import configure_logging, configure_threads, use_xla_cache
+
         configure_logging(settings.log_level)
         configure_threads()
         if settings.policy_compiler == "xla":
             use_xla_cache()
-        return settings
 
     def read_settings(self, argv: Optional[Sequence[str]] = None, *,
                       exit_on_error: bool = False) -> RunSettings:
         """The settings of command line ``argv`` as :meth:`parse` reads them, checked by
-        :meth:`check`, without :meth:`parse`'s set-up (logging, threads) and without
-        printing or exiting: ``ValueError`` with the usage error's message
+        :meth:`check`, without printing or exiting: ``ValueError`` with the usage error's message
         (``exit_on_error=True``: argparse's own errors and ``--help`` print and exit as on
         the command line). A sweep checks each of its settings so before it starts a run."""
         settings = parse_settings(self.settings, argv, description=self.description,
@@ -189,7 +196,9 @@ class Task:
         return self.run_hooks(self, settings, config, env)
 
     def experiment(self, settings: RunSettings) -> Experiment:
-        """A new run in ``settings.output``, or the one saved there with ``--resume``."""
+        """A new run in ``settings.output``, or the one saved there with ``--resume``
+        (after :meth:`set_up`)."""
+        self.set_up(settings)
         config = self.config(settings)
         env = self.make_env(settings, config)
         hooks = self.hooks(settings, config, env)
