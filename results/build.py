@@ -77,6 +77,10 @@ MAX_BYTES = 200_000
 
 EPISODE_FIELDS = ("episode", "random", "steps", "min_distance", "final_distance",
                   "steps_to_target")
+#: an episode's fields kept only when its record has them (runs on a constraint): the
+#: policy's predicted risk, whether the real episode broke the constraint, whether the
+#: policy ran (Safe PILCO's loop)
+CONSTRAINT_FIELDS = ("predicted_risk", "violated")
 #: summary fields kept per run when present: the adaptation's damage and recovery, the
 #: multi-target reacher's held-out test (steps per test target, how many within the rule),
 #: whether a run held its first success to the end and which learned episodes were solved,
@@ -152,6 +156,17 @@ def trim_provenance(provenance: Any) -> Optional[Dict[str, Any]]:
     return out
 
 
+def trim_episode(record: Mapping[str, Any]) -> Dict[str, Any]:
+    """What an export keeps of one episode's record: :data:`EPISODE_FIELDS` (distances
+    rounded), and :data:`CONSTRAINT_FIELDS` and whether its policy ran when it has them."""
+    out = {k: (_round(record.get(k)) if k.endswith("distance") else record.get(k))
+           for k in EPISODE_FIELDS}
+    out.update((k, record[k]) for k in CONSTRAINT_FIELDS if k in record)
+    if isinstance(record.get("safety"), Mapping) and "executed" in record["safety"]:
+        out["safety"] = {"executed": bool(record["safety"]["executed"])}
+    return out
+
+
 def trim_run(summary: Mapping[str, Any], setting: str) -> Dict[str, Any]:
     """What the table, the figures and the notebook need of one run summary."""
     if "success" in summary and summary["success"] is not None:
@@ -166,8 +181,7 @@ def trim_run(summary: Mapping[str, Any], setting: str) -> Dict[str, Any]:
         "solved": bool(summary.get("solved")),
         "solved_at_episode": summary.get("solved_at_episode"),
         "seconds": _round(seconds.get("total"), 1) if isinstance(seconds, Mapping) else None,
-        "episodes": [{k: (_round(e.get(k)) if k.endswith("distance") else e.get(k))
-                      for k in EPISODE_FIELDS} for e in summary["episodes"]],
+        "episodes": [trim_episode(e) for e in summary["episodes"]],
         "distances": [[_round(d) for d in episode] for episode in summary.get("distances") or []],
     }
     provenance = trim_provenance(summary.get("provenance"))
@@ -651,9 +665,11 @@ def with_table(text: str, table: str, where: str = "README.md") -> str:
 def draw_figures(data: Mapping[str, Any], directory=FIGURE_DIR,
                  name: Optional[str] = None) -> List[str]:
     """``<name>_success_rate.png`` and ``<name>_distance_bands.png`` of one export (one
-    line or panel per setting; ``name`` the export's file stem, default its task);
-    returns the paths drawn."""
-    from pilco.sweep.figures import distance_bands_figure, success_rate_figure
+    line or panel per setting; ``name`` the export's file stem, default its task), and
+    ``<name>_risk_calibration.png`` when its episodes record a predicted risk; returns
+    the paths drawn."""
+    from pilco.sweep.figures import (distance_bands_figure, risk_calibration_figure,
+                                     success_rate_figure)
 
     per_setting = {s: [as_summary(r) for r in data["runs"] if r["setting"] == s]
                    for s in settings_of(data)}
@@ -665,7 +681,10 @@ def draw_figures(data: Mapping[str, Any], directory=FIGURE_DIR,
                                  title=title),
              distance_bands_figure(per_setting,
                                    os.path.join(directory, f"{task}_distance_bands.png"),
-                                   title=title)]
+                                   title=title),
+             risk_calibration_figure(per_setting,
+                                     os.path.join(directory, f"{task}_risk_calibration.png"),
+                                     title=title)]
     return [p for p in drawn if p is not None]
 
 

@@ -362,3 +362,29 @@ def test_the_adaptation_row_counts_recoveries_against_learning_from_scratch():
     assert "| 3 | 3 | never | never |" in build.pairs_table(adapted, scratch)
     with pytest.raises(FileNotFoundError, match="damaged_reacher"):
         build.table_row(dict(row, scratch="damaged_reacher"), {"adaptation": adapted})
+
+
+def test_runs_on_a_constraint_keep_their_risks_and_draw_a_calibration(sweep, tmp_path):
+    """An episode's predicted risk, real violation and whether its policy ran survive the
+    export (Safe PILCO's other per-episode notes do not); the export's aggregate has the
+    calibration, and its figures include it."""
+    path = sweep / "default" / "seed-0" / "summary.json"
+    summary = json.loads(path.read_text())
+    summary["episodes"][0]["violated"] = True
+    summary["episodes"][1].update(
+        violated=False, predicted_risk={"independent": 0.02, "union": 0.03},
+        safety={"executed": True, "risk": 0.02, "tries": [{"weight": 50.0}]})
+    summary["safety"] = {"learned": 1, "executed": 1, "executed_violated": 0,
+                         "random_violated": 1, "executed_risks": [0.02]}
+    path.write_text(json.dumps(summary))
+    data = build.export_sweep(sweep)
+    first = data["runs"][0]["episodes"]
+    assert first[0]["violated"] is True and "predicted_risk" not in first[0]
+    assert first[1]["predicted_risk"] == {"independent": 0.02, "union": 0.03}
+    assert first[1]["safety"] == {"executed": True}
+    calibration = data["settings"]["default"]["safety"]["calibration"]
+    assert [(b["episodes"], b["violated"]) for b in calibration["independent"]] == [(1, 0)]
+    drawn = build.draw_figures(data, directory=tmp_path)
+    assert [os.path.basename(p) for p in drawn][-1] == "reacher_risk_calibration.png"
+    # the other runs' episodes are as before: no constraint fields
+    assert set(data["runs"][1]["episodes"][1]) == set(build.EPISODE_FIELDS)
