@@ -235,6 +235,24 @@ def test_sigterm_stops_at_the_next_safe_point_and_saves(tmp_path):
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
 
 
+def test_an_interrupt_during_a_search_keeps_the_agent_of_the_last_episode(tmp_path):
+    """A signal during episode 3's policy search: the agent, halfway through its fit and
+    search, is not written over agent.npz, so that --resume redoes episode 3 from the
+    agent episode 2 left (the resumed run is then the uninterrupted one)."""
+    saved = []
+
+    class Saving(StandInAgent):
+        def save(self, path):  # counts the searches the saved agent had been through
+            saved.append(len([c for c in self.calls if c[0] == "policy"]))
+            with open(path, "wb"):
+                pass
+
+    exp, _ = experiment(tmp_path, agent_kw={"interrupt_policy_at": 2}, agent_class=Saving)
+    summary = exp.run()
+    assert exp.interrupted and len(summary["episodes"]) == 2
+    assert saved and saved[-1] == 1 and max(saved) == 1  # episode 2's, never the one cut
+
+
 def test_resume_reads_progress_written_before_the_typed_fields(tmp_path):
     exp, _ = experiment(tmp_path)
     exp.run_random_episode()

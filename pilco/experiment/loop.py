@@ -155,12 +155,14 @@ class Experiment(RunRecord):
         number = len(self.episodes) + 1
         seconds: Dict[str, float] = {}
         cpu: Dict[str, float] = {}
+        self._learning = True  # an interrupt until the search ends keeps the last agent.npz
         for phase, step in (("model", train_model), ("policy", learn_policy)):
             t0, c0 = time.perf_counter(), time.process_time()
             step(self, number)
             seconds[phase] = time.perf_counter() - t0
             cpu[phase] = time.process_time() - c0
             raise_if_stop_requested()
+        self._learning = False
         self.cpu_seconds[number] = cpu
         evaluations = getattr(self.agent, "policy_evaluations", None)
         prediction = predictions_before(self)
@@ -204,8 +206,10 @@ class Experiment(RunRecord):
                         self.interrupted = True
                 except KeyboardInterrupt:
                     self.interrupted = True
-                    logger.warning("interrupted: saving the agent and %d episodes to %s",
-                                   len(self.episodes), self.directory)
+                    logger.warning("interrupted: saving %d episodes to %s%s", len(self.episodes),
+                                   self.directory, " (the agent as the last episode left it: "
+                                   "--resume redoes the episode in progress)"
+                                   if self._learning else " and the agent")
                     with interrupts_deferred():
                         self.save()
         finally:

@@ -55,6 +55,9 @@ class RunRecord:
         self.interrupted = False
         self.complete = False
         self._partial: Optional[Episode] = None
+        #: True while a learned episode's model fit and policy search change the agent:
+        #: an interrupt then keeps ``agent.npz`` as the last finished episode left it
+        self._learning = False
         self._t_start: Optional[float] = None
         #: the training data of the last model fit (``train_model`` skips an identical refit)
         self.model_trained_on: Optional[Data] = None
@@ -123,9 +126,13 @@ class RunRecord:
         self.store.save_progress(progress_record(self), self.summary())
 
     def save(self) -> None:
-        """Save data first (never lose transitions), then the agent, then progress."""
+        """Save data first (never lose transitions), then the agent, then progress. The
+        agent is not saved while a learned episode's model fit or policy search is under
+        way (an interrupt there): ``agent.npz`` stays as the last finished episode left it,
+        so that ``--resume`` redoes that episode from the same state as the run would
+        have, and the resumed run is the uninterrupted one."""
         self.store.save_data(self.episodes, self.predictions, self._partial)
-        if self.agent is not None:
+        if self.agent is not None and not self._learning:
             self.store.save_agent(self.agent)
         self.save_progress()
 
