@@ -78,8 +78,8 @@ MAX_BYTES = 200_000
 EPISODE_FIELDS = ("episode", "random", "steps", "min_distance", "final_distance",
                   "steps_to_target")
 #: an episode's fields kept only when its record has them (runs on a constraint): the
-#: policy's predicted risk, whether the real episode broke the constraint, whether the
-#: policy ran (Safe PILCO's loop)
+#: policy's predicted risk and whether the real episode broke the constraint (whether the
+#: policy ran, Safe PILCO's loop, is kept from its ``safety`` record by :func:`trim_episode`)
 CONSTRAINT_FIELDS = ("predicted_risk", "violated")
 #: summary fields kept per run when present: the adaptation's damage and recovery, the
 #: multi-target reacher's held-out test (steps per test target, how many within the rule),
@@ -668,8 +668,7 @@ def draw_figures(data: Mapping[str, Any], directory=FIGURE_DIR,
     line or panel per setting; ``name`` the export's file stem, default its task), and
     ``<name>_risk_calibration.png`` when its episodes record a predicted risk; returns
     the paths drawn."""
-    from pilco.sweep.figures import (distance_bands_figure, risk_calibration_figure,
-                                     success_rate_figure)
+    from pilco.sweep.figures import draw_figures as draw_sweep_figures
 
     per_setting = {s: [as_summary(r) for r in data["runs"] if r["setting"] == s]
                    for s in settings_of(data)}
@@ -677,15 +676,7 @@ def draw_figures(data: Mapping[str, Any], directory=FIGURE_DIR,
                    else data["seeds"])
     title = f"{data['task']}, seeds {seed_ranges(seeds)}"
     task = name or data["task"]
-    drawn = [success_rate_figure(per_setting, os.path.join(directory, f"{task}_success_rate.png"),
-                                 title=title),
-             distance_bands_figure(per_setting,
-                                   os.path.join(directory, f"{task}_distance_bands.png"),
-                                   title=title),
-             risk_calibration_figure(per_setting,
-                                     os.path.join(directory, f"{task}_risk_calibration.png"),
-                                     title=title)]
-    return [p for p in drawn if p is not None]
+    return draw_sweep_figures(per_setting, str(directory), prefix=f"{task}_", title=title)
 
 
 # ------------------------------------------------------------------------ command line

@@ -208,6 +208,9 @@ def test_risk_calibration_bins_the_executed_episodes():
     union = aggregate.risk_calibration([a, b], "union")
     assert [x["episodes"] for x in union] == [3, 1, 1, 1]  # 0.045 still below 0.05
     assert aggregate.risk_calibration([summary(2)]) == []
+    from pilco.constraints import COMBINE
+
+    assert sorted(aggregate.RISK_RULES) == sorted(COMBINE)  # the rules the records hold
     with pytest.raises(ValueError, match="increasing"):
         aggregate.risk_calibration([a], edges=[0.0, 0.5, 0.5])
     a["safety"] = {"learned": 4, "executed": 4, "executed_violated": 2,

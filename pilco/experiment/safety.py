@@ -23,8 +23,8 @@ from typing import Any, Dict, Optional, Sequence
 
 import numpy as np
 
-from ..constraints import COMBINE, horizon_risk, step_violations, violated_states
-from ..models.safe import predicted_risk, safe_policy_search
+from ..constraints import COMBINE, horizon_risk, violated_states
+from ..models.safe import predicted_risk, predicted_step_risks, safe_policy_search
 from ..snapshots import snapshot
 from .hooks import RunHooks
 from .learning import search_policy
@@ -79,8 +79,7 @@ class RecordsViolations(RunHooks):
 
     def watch(self, run, number: int, policy):
         policy = super().watch(run, number, policy)
-        M, S = run.agent.predict_trajectory()
-        p = step_violations(self.constraint, M, S)[1:]
+        p = predicted_step_risks(run.agent, self.constraint)  # one prediction, both rules
         run.policy_notes["predicted_risk"] = {rule: float(horizon_risk(p, rule))
                                               for rule in COMBINE}
         return policy

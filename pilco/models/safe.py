@@ -29,7 +29,8 @@ from ..constraints import (COMBINE, ViolationPenalty, horizon_risk, step_violati
 from ..snapshots import restore, snapshot
 from ..validation import check_positive_float, check_positive_int
 
-__all__ = ["SafeSearch", "predicted_risk", "sampled_risk", "safe_policy_search"]
+__all__ = ["SafeSearch", "predicted_step_risks", "predicted_risk", "sampled_risk",
+           "safe_policy_search"]
 
 logger = logging.getLogger(__name__)
 
@@ -55,12 +56,18 @@ class SafeSearch:
         return dataclasses.asdict(self)
 
 
+def predicted_step_risks(agent, constraint) -> np.ndarray:
+    """The predicted probability that the agent's policy violates ``constraint`` at each
+    step 1..H of its horizon, from its start distribution (of
+    :meth:`~pilco.models.PILCO.predict_trajectory`), ``[H]``."""
+    M, S = agent.predict_trajectory()
+    return step_violations(constraint, M, S)[1:]
+
+
 def predicted_risk(agent, constraint, rule: str = "independent") -> float:
     """The predicted probability that the agent's policy violates ``constraint`` at some
-    step of its horizon, from its start distribution (steps 1..H of
-    :meth:`~pilco.models.PILCO.predict_trajectory`)."""
-    M, S = agent.predict_trajectory()
-    return float(horizon_risk(step_violations(constraint, M, S)[1:], rule))
+    step of its horizon (:func:`predicted_step_risks` combined by ``rule``)."""
+    return float(horizon_risk(predicted_step_risks(agent, constraint), rule))
 
 
 def sampled_risk(agent, constraint, samples: int = 1000, seed: int = 0,

@@ -16,11 +16,12 @@ Conventions:
 """
 from __future__ import annotations
 
+import bisect
 import math
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
 __all__ = ["WILSON_Z95", "wilson_interval", "quantile", "quartiles", "run_success",
-           "solved_in_episode", "RISK_BINS", "risk_calibration",
+           "solved_in_episode", "RISK_BINS", "RISK_RULES", "risk_calibration",
            "aggregate_setting", "provenance_counts", "solved_by_episode", "format_table"]
 
 #: the standard normal's 97.5 % quantile: a two-sided 95 % interval
@@ -128,6 +129,10 @@ def solved_in_episode(summaries: Sequence[Mapping[str, Any]], episodes: int
 #: threshold lies, and near 1
 RISK_BINS = (0.0, 0.01, 0.05, 0.1, 0.2, 0.5, 0.8, 0.95, 1.0)
 
+#: the combination rules an episode's ``predicted_risk`` records (``pilco.constraints.COMBINE``;
+#: named here, where only the standard library is imported)
+RISK_RULES = ("independent", "union")
+
 
 def risk_calibration(summaries: Sequence[Mapping[str, Any]], rule: str = "independent",
                      edges: Sequence[float] = RISK_BINS) -> List[Dict[str, Any]]:
@@ -148,11 +153,10 @@ def risk_calibration(summaries: Sequence[Mapping[str, Any]], rule: str = "indepe
             if (record.get("random") or risk is None or "violated" not in record
                     or not record.get("safety", {}).get("executed", True)):
                 continue
-            k = next((i for i, high in enumerate(edges[1:]) if risk < high), None)
-            if k is None and risk <= edges[-1]:
-                k = len(bins) - 1
-            if k is not None and risk >= edges[0]:
-                bins[k].append((float(risk), bool(record["violated"])))
+            if not edges[0] <= risk <= edges[-1]:
+                continue
+            k = min(bisect.bisect_right(edges, risk) - 1, len(bins) - 1)  # the last closed
+            bins[k].append((float(risk), bool(record["violated"])))
     out = []
     for (low, high), members in zip(zip(edges, edges[1:]), bins):
         if not members:
@@ -229,8 +233,7 @@ def aggregate_setting(summaries: Sequence[Mapping[str, Any]], *, runs: Optional[
             **{key: sum(int(c.get(key, 0)) for c in counts)
                for key in ("learned", "executed", "executed_violated", "random_violated")},
             "executed_risk": {**quartiles(risks), "max": max(risks) if risks else None}}
-        calibration = {rule: risk_calibration(summaries, rule)
-                       for rule in ("independent", "union")}
+        calibration = {rule: risk_calibration(summaries, rule) for rule in RISK_RULES}
         if any(calibration.values()):
             result["safety"]["calibration"] = calibration
     if any("episodes_to_recover" in s for s in summaries):

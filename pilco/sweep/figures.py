@@ -19,10 +19,10 @@ from typing import Any, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from .aggregate import risk_calibration, solved_by_episode, solved_in_episode
+from .aggregate import RISK_RULES, risk_calibration, solved_by_episode, solved_in_episode
 
 __all__ = ["success_rate_figure", "distance_bands_figure", "distance_quartiles",
-           "risk_calibration_figure"]
+           "risk_calibration_figure", "draw_figures"]
 
 logger = logging.getLogger(__name__)
 
@@ -145,16 +145,15 @@ def risk_calibration_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]]
     ``independent`` product and the ``union`` bound), the diagonal for reference; points
     below it are conservative predictions. Returns ``path``, or None when no run records
     a predicted risk (nothing drawn, nothing logged: most tasks have no constraint)."""
-    rules = ("independent", "union")
-    table = {label: {rule: risk_calibration(runs, rule) for rule in rules}
+    table = {label: {rule: risk_calibration(runs, rule) for rule in RISK_RULES}
              for label, runs in summaries.items()}
     table = {k: v for k, v in table.items() if any(v.values())}
     if not table:
         return None
     plt = _pyplot()
-    fig, axes = plt.subplots(1, len(rules), figsize=(9.6, 4.2), squeeze=False, sharey=True)
+    fig, axes = plt.subplots(1, len(RISK_RULES), figsize=(9.6, 4.2), squeeze=False, sharey=True)
     try:
-        for ax, rule in zip(axes[0], rules):
+        for ax, rule in zip(axes[0], RISK_RULES):
             ax.plot([0, 1], [0, 1], color="grey", linewidth=0.8, linestyle=":")
             for label, per_rule in table.items():
                 bins = per_rule[rule]
@@ -181,3 +180,16 @@ def risk_calibration_figure(summaries: Mapping[str, Sequence[Mapping[str, Any]]]
     finally:
         _save_and_close(plt, fig, path)
     return path
+
+
+def draw_figures(summaries: Mapping[str, Sequence[Mapping[str, Any]]], directory: str,
+                 prefix: str = "", title: str = "") -> List[str]:
+    """Every figure of the module for ``{setting: [summary, ...]}`` into ``directory``,
+    each file named ``prefix`` + its name (``success_rate.png``, ``distance_bands.png``,
+    ``risk_calibration.png``); returns the paths drawn (a figure without its data is
+    not)."""
+    drawn = [draw(summaries, os.path.join(directory, f"{prefix}{name}.png"), title=title)
+             for draw, name in ((success_rate_figure, "success_rate"),
+                                (distance_bands_figure, "distance_bands"),
+                                (risk_calibration_figure, "risk_calibration"))]
+    return [p for p in drawn if p is not None]

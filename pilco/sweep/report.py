@@ -76,12 +76,6 @@ def write_report(args: argparse.Namespace, specs: Sequence[RunSpec],
     write_json_atomic(os.path.join(output, "sweep.json"), report)
     if not args.no_figures:
         title = f"{args.task}, seeds {args.seeds}"
-        figures.success_rate_figure(per_setting, os.path.join(output, "success_rate.png"),
-                                    title=title)
-        figures.distance_bands_figure(per_setting, os.path.join(output, "distance_bands.png"),
-                                      title=title)
-        figures.risk_calibration_figure(per_setting,
-                                        os.path.join(output, "risk_calibration.png"),
-                                        title=title)
+        figures.draw_figures(per_setting, output, title=title)
     logger.info("results in %s", os.path.join(output, "sweep.json"))
     return report
