@@ -54,6 +54,10 @@ def test_pendulum_with_a_target_widths_an_angle_and_the_hold_rule(tmp_path):
     (["--env", "Pendulum-v1", "--widths", "1", "2"], "widths must be one positive number or 3"),
     (["--env", "Pendulum-v1", "--angles", "5"], "--angles [5]: the state has dimensions 0-2"),
     (["--env", "Pendulum-v1", "--env-kwargs", "[1]"], "expected a JSON object"),
+    (["--env", "Pendulum-v1", "--start-var", "1", "2"], "--start-var: one number or 3"),
+    (["--env", "Pendulum-v1", "--noise-variance", "1", "2"], "--noise-variance: one number"),
+    (["--env", "Pendulum-v1", "--widths", "1", "1", "inf", "--success-dims", "2"],
+     "distance dimensions [2]: each must be one of 0-2 with a finite width"),
 ])
 def test_bad_settings_are_usage_errors_before_any_episode(flags, message, tmp_path, capsys):
     with pytest.raises(SystemExit) as stop:
@@ -66,7 +70,39 @@ def test_bad_settings_are_usage_errors_before_any_episode(flags, message, tmp_pa
 def test_the_presets_name_known_settings():
     for name in PRESETS:
         args = GYM.read_settings(["--preset", name, "--output", "x"])
-        assert args.planning_horizon == 40 and args.success == "survive"
+        assert args.env == PRESETS[name]["env"] and args.success in ("survive", "hold", "reach")
+    car = GYM.read_settings(["--preset", "mountain-car", "--output", "x"])
+    assert (car.horizon, car.action_repeat, car.start_var) == (25, 5, (0.0065, 4.5e-5))
+
+
+def test_the_pendulum_presets_success_is_the_pendulum_tasks_angle():
+    # hold within 2√2 sin(0.15) widths on (cos θ, sin θ) is |θ| < 0.3 rad
+    args = GYM.parse(["--preset", "pendulum", "--output", "x"])
+    env = GYM.make_env(args, GYM.config(args))
+    try:
+        for theta, inside in ((0.29, True), (-0.29, True), (0.31, False), (3.0, False)):
+            x = np.array([np.cos(theta), np.sin(theta), 5.0])  # the speed is not measured
+            assert (env.distance(x) < args.success_distance) == inside
+    finally:
+        env.close()
+
+
+def test_per_dimension_start_and_fixed_noise_and_the_reach_rule(tmp_path):
+    # the mountain car: the goal ends the episode; reach measures the position only
+    exp, summary = run(tmp_path, "--env", "MountainCarContinuous-v0", "--horizon", "10",
+                       "--action-repeat", "5", "--target", "0.5", "0", "--widths", "0.16",
+                       "0.03", "--start-var", "0.0065", "4.5e-5", "--noise-variance",
+                       "6.5e-4", "0", "--success", "reach", "--success-dims", "0",
+                       "--success-distance", "0.3125")
+    assert np.allclose(np.diag(exp.agent.S_init), [0.0065, 4.5e-5])
+    first, second = exp.agent.mgpr.models
+    # the position's noise is fixed at the value given, the speed's learned
+    assert not first.likelihood.variance.trainable and second.likelihood.variance.trainable
+    assert float(first.likelihood.variance.numpy()) == pytest.approx(6.5e-4)
+    env = exp.make_env()
+    assert env.distance(np.array([0.46, 0.07])) == pytest.approx(0.04 / 0.16)
+    assert exp.config.solved_rule == "reach" and exp.config.success_threshold == 0.3125
+    assert summary["success"] == (min(summary["distances"][-1][1:]) < 0.3125)
 
 
 def test_a_gym_run_is_diagnosed_without_predicting_the_envs_end(tmp_path, capsys):

@@ -3,9 +3,10 @@
 :class:`GymAdapter` wraps an environment so that its ``info`` carries ``"distance"``, the
 state's distance to a target in cost widths, ``sqrt(Σ_d ((x_d - t_d) / w_d)²)`` over the
 dimensions with a finite width (the saturating reward ``exp(-distance² / 2)`` is the
-task's), and holds each action for ``action_repeat`` of the environment's steps (their
-rewards summed; an episode that terminates or is truncated during them ends there). The
-state is the observation as float64. Bad settings (a non-Box space, a target or widths of
+task's) or over the dimensions named as ``distance_dims``, and holds each action for
+``action_repeat`` of the environment's steps (their rewards summed; an episode that
+terminates or is truncated during them ends there). The state is the observation as
+float64. Bad settings (a non-Box space, a target or widths of
 the wrong length, a width that is not positive) raise before any episode.
 """
 from __future__ import annotations
@@ -37,10 +38,13 @@ class GymAdapter(gymnasium.Wrapper):
         widths: the cost width of each state dimension [D], or one for all (``inf``: the
             dimension is not in the cost).
         action_repeat: environment steps per step of PILCO (the reference port's SUBS).
+        distance_dims: the state dimensions of ``info["distance"]`` (default: those with a
+            finite width); each needs a finite width.
     """
 
     def __init__(self, env: gymnasium.Env, target: Sequence[float] = (),
-                 widths: Sequence[float] = (1.0,), action_repeat: int = 1) -> None:
+                 widths: Sequence[float] = (1.0,), action_repeat: int = 1,
+                 distance_dims: Sequence[int] = ()) -> None:
         super().__init__(env)
         D = box_dimension(env.observation_space, "observation")
         box_dimension(env.action_space, "action")
@@ -60,13 +64,20 @@ class GymAdapter(gymnasium.Wrapper):
                 or action_repeat < 1:
             raise ValueError(f"action_repeat must be an integer >= 1, got {action_repeat!r}")
         self.target, self.widths, self.action_repeat = target, widths, int(action_repeat)
-        self._in_cost = np.isfinite(widths)
+        self._measured = np.isfinite(widths)
+        if len(distance_dims):
+            dims = [int(i) for i in distance_dims]
+            bad = [i for i in dims if not 0 <= i < D or not np.isfinite(widths[i])]
+            if bad:
+                raise ValueError(f"distance dimensions {bad}: each must be one of 0-{D - 1} "
+                                 f"with a finite width")
+            self._measured = np.isin(np.arange(D), dims)
         self.observation_space = spaces.Box(-np.inf, np.inf, (D,), np.float64)
 
     def distance(self, state) -> float:
         """The state's distance to the target in cost widths."""
-        z = (np.asarray(state, dtype=np.float64) - self.target)[self._in_cost]
-        return float(np.sqrt(np.sum((z / self.widths[self._in_cost]) ** 2)))
+        z = (np.asarray(state, dtype=np.float64) - self.target)[self._measured]
+        return float(np.sqrt(np.sum((z / self.widths[self._measured]) ** 2)))
 
     def _out(self, obs, info: dict):
         x = np.asarray(obs, dtype=np.float64).reshape(-1)

@@ -8,8 +8,8 @@ held for ``--action-repeat`` steps, and the reward PILCO maximises is the satura
 The policy is an RBF network of ``--basis-functions`` with actions bounded by
 ``--max-action`` (default: the action space's bound); ``--angles`` names state dimensions
 that are angles (the policy and the dynamics model then see their sine and cosine). The
-policy is optimised from the mean of the episodes' start states with covariance
-``--start-var`` times the identity, over ``--planning-horizon`` steps (default
+policy is optimised from the mean of the episodes' start states with variances
+``--start-var``, over ``--planning-horizon`` steps (default
 ``--horizon``).
 
 The run draws its figures but no frames of the environment (an arbitrary environment's
@@ -20,16 +20,23 @@ Success (stated before a run, as ``--success``): ``survive``, the last episode l
 ``--success-steps`` steps (default ``--horizon``: for an environment that terminates when
 it fails, e.g. a pole that falls; an episode that ends early keeps its data), or
 ``hold``, its last ``--success-steps`` states all within ``--success-distance`` cost
-widths of the target.
+widths of the target, or ``reach``, one of its states that close (e.g. a goal where the
+environment ends the episode). The distance of ``hold`` and ``reach`` is measured over
+``--success-dims`` (default: the dimensions in the cost). The start distribution's
+variance (``--start-var``) and a fixed noise variance of the dynamics GPs
+(``--noise-variance``; 0: learned) take one number per state dimension or one for all.
 
 Presets (``--preset NAME``) hold other libraries' examples on gymnasium's current
-versions: ``inverted-pendulum``, the reference GPflow port's ``inverted_pendulum.py``;
-``torchrl``, TorchRL's PILCO example (both on InvertedPendulum-v5); see :data:`PRESETS`.
+versions: ``inverted-pendulum``, the reference GPflow port's ``inverted_pendulum.py``, and
+``torchrl``, TorchRL's PILCO example (both on InvertedPendulum-v5); ``mountain-car``, the
+port's ``mountain_car.py`` (MountainCarContinuous-v0); ``pendulum``, the port's
+``pendulum_swing_up.py`` (Pendulum-v1 from hanging down); see :data:`PRESETS`.
 """
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from typing import Any, Dict, List, Optional
 
 import numpy as np
@@ -56,8 +63,35 @@ PRESETS: Dict[str, Dict[str, Any]] = {
     # learned episode is the evaluation. Not carried over: its 100 Adam steps per epoch
     # (the policy search is this project's), and its data cap (the last 350 transitions).
     "torchrl": dict(env="InvertedPendulum-v5", random_episodes=20, episodes=23, horizon=100,
-                    planning_horizon=40, basis_functions=10, start_var=1e-3,
+                    planning_horizon=40, basis_functions=10, start_var=(1e-3,),
                     success="survive", success_steps=100),
+    # the reference port's mountain_car.py: 5 random rollouts of 25 steps, each action held
+    # for 5 steps, 25 basis functions, then 5 learned episodes, 100 policy iterations with
+    # 3 restarts. The port works in units of its random data's mean and standard deviation
+    # (about 0.115 in position, 0.0095 in speed): the reward W = diag(0.5, 0.1), the start
+    # 0.5 I and the GPs' noise variance 0.05 there are these widths, variances and noise
+    # in the environment's units. Success: the car at the goal (x >= 0.45, where the
+    # environment ends the episode), 0.05 or less from the target's x = 0.5.
+    "mountain-car": dict(env="MountainCarContinuous-v0", action_repeat=5, horizon=25,
+                         random_episodes=5, episodes=10, basis_functions=25,
+                         policy_iters=100, policy_restarts=3, target=(0.5, 0.0),
+                         widths=(0.16, 0.03), start_var=(0.0065, 4.5e-5),
+                         noise_variance=(6.5e-4, 4.5e-6), success="reach", success_dims=(0,),
+                         success_distance=0.05 / 0.16),
+    # the reference port's pendulum_swing_up.py (the `pendulum` task's workload) on the
+    # package's Pendulum-v1 that starts hanging down, as the port's reset does, each action
+    # held for 3 steps: 4 random episodes, then 8 learned ones of 40 steps, 30 basis
+    # functions, 50 iterations and 2 restarts for the GPs and the policy, the reward
+    # W = diag(2, 2, 0.3) around upright on [cos θ, sin θ, θ̇], the start
+    # diag(0.01, 0.05, 0.01), the GPs' noise variance 1e-3. Success: the `pendulum` task's
+    # |θ| < 0.3 rad for the last 10 steps (on [cos θ, sin θ] in these widths: 2√2 sin 0.15).
+    "pendulum": dict(env="pilco/PendulumSwingUp-v0", random_episodes=4, episodes=12,
+                     horizon=40, basis_functions=30, policy_iters=50, policy_restarts=2,
+                     model_iters=50, model_restarts=2, target=(1.0, 0.0, 0.0),
+                     widths=(math.sqrt(0.5), math.sqrt(0.5), 1 / math.sqrt(0.3)),
+                     start_var=(0.01, 0.05, 0.01), noise_variance=(1e-3,), success="hold",
+                     success_dims=(0, 1), success_steps=10,
+                     success_distance=2 * math.sqrt(2) * math.sin(0.15)),
 }
 
 
@@ -95,18 +129,26 @@ class GymSettings(RunSettings):
     max_action: Optional[float] = setting(
         None, "bound of the policy's actions", kind=positive_float,
         unset="the action space's bound")
-    start_var: float = setting(0.01, "variance of the start distribution the policy is "
-                               "optimised from (times the identity)", kind=positive_float)
+    start_var: tuple = setting((0.01,), "variance of the start distribution the policy is "
+                               "optimised from, per state dimension or one for all",
+                               kind=positive_float, nargs="+", metavar="V")
+    noise_variance: tuple = setting((0.0,), "the dynamics GPs' noise variance, fixed, per "
+                                    "state dimension or one for all (0: learned)",
+                                    kind=non_negative_float, nargs="+", metavar="V")
     planning_horizon: Optional[int] = setting(
         None, "steps of the policy objective's prediction", kind=positive_int,
         unset="--horizon")
-    success: str = setting("survive", "success rule of the last episode: it lasted "
-                           "--success-steps steps, or held the target for them",
-                           choices=("survive", "hold"))
+    success: str = setting("survive", "success rule: the last episode lasted "
+                           "--success-steps steps, or held the target for them; reach: "
+                           "a learned episode came within --success-distance of it",
+                           choices=("survive", "hold", "reach"))
     success_steps: Optional[int] = setting(None, "steps of the success rule",
                                            kind=positive_int, unset="--horizon")
-    success_distance: float = setting(1.0, "hold: the distance to the target in cost widths",
-                                      kind=non_negative_float)
+    success_distance: float = setting(1.0, "hold, reach: the distance to the target in cost "
+                                      "widths", kind=non_negative_float)
+    success_dims: Optional[tuple] = setting(
+        None, "state dimensions of the success rule's distance", kind=int, nargs="+",
+        metavar="I", unset="the dimensions in the cost")
 
 
 class GymTask(Task):
@@ -133,7 +175,8 @@ class GymTask(Task):
         except (gymnasium.error.Error, TypeError, ImportError) as err:
             raise ValueError(f"--env {s.env}: cannot make the environment ({err})") from None
         try:
-            adapter = GymAdapter(env, s.target or (), s.widths, s.action_repeat)
+            adapter = GymAdapter(env, s.target or (), s.widths, s.action_repeat,
+                                 distance_dims=s.success_dims or ())
         except (TypeError, ValueError) as err:
             env.close()
             raise ValueError(f"--env {s.env}: {err}") from None
@@ -142,16 +185,22 @@ class GymTask(Task):
         if bad:
             adapter.close()
             raise ValueError(f"--angles {bad}: the state has dimensions 0-{D - 1}")
+        for name in ("start_var", "noise_variance"):
+            given = np.atleast_1d(getattr(s, name)).size
+            if given not in (1, D):
+                adapter.close()
+                raise ValueError(f"--{name.replace('_', '-')}: one number or {D} (one per "
+                                 f"state dimension), got {given}")
         return adapter
 
     def config(self, s: GymSettings) -> ExperimentConfig:
         """The loop's config; never rendering: an arbitrary environment's renderer may
         need packages that are not installed (pygame) or, for MuJoCo, may not run in a
         process that loaded TensorFlow."""
-        hold = s.success == "hold"
+        near = s.success in ("hold", "reach")
         config = self.loop_config(
             s, env_id=s.env, env_kwargs=json.loads(s.env_kwargs), random_action_scale=None,
-            cost_width=1.0, success_threshold=s.success_distance if hold else 1.0,
+            cost_width=1.0, success_threshold=s.success_distance if near else 1.0,
             solved_rule=s.success, hold_steps=s.success_steps or s.horizon)
         return dataclasses.replace(config, render=False)
 
@@ -161,7 +210,10 @@ class GymTask(Task):
     def agent_builder(self, s: GymSettings, env):
         """``(data, start_states) -> PILCO``: an RBF policy on the state (angles as sine
         and cosine), the saturating reward of the distance in cost widths, the start
-        distribution from the episodes' start states."""
+        distribution centred on the mean of the episodes' start states, the GPs' noise
+        variance fixed where ``--noise-variance`` gives one."""
+        import gpflow
+
         from ..controllers import RbfController
         from ..models import PILCO
         from ..rewards import ExponentialReward
@@ -171,6 +223,8 @@ class GymTask(Task):
         bound = (s.max_action if s.max_action is not None
                  else float(np.min(np.abs(env.action_space.high))))
         inverse = np.where(np.isfinite(env.widths), 1.0 / env.widths ** 2, 0.0)
+        start_var = np.broadcast_to(np.atleast_1d(s.start_var).astype(np.float64), (D,))
+        noise = np.broadcast_to(np.atleast_1d(s.noise_variance).astype(np.float64), (D,))
 
         def build(data, start_states):
             angles = list(s.angles or ())
@@ -178,9 +232,13 @@ class GymTask(Task):
                                        max_action=bound, seed=s.seed)
             reward = ExponentialReward(D, W=np.diag(inverse), t=env.target)
             m_init = np.mean(np.asarray(start_states, dtype=np.float64), axis=0)[None, :]
-            return PILCO(data, controller, reward, horizon=s.planning_horizon or s.horizon,
-                         m_init=m_init, S_init=s.start_var * np.eye(D),
-                         angle_indices=angles)
+            agent = PILCO(data, controller, reward, horizon=s.planning_horizon or s.horizon,
+                          m_init=m_init, S_init=np.diag(start_var), angle_indices=angles)
+            for model, variance in zip(agent.mgpr.models, noise):
+                if variance > 0:
+                    model.likelihood.variance.assign(variance)
+                    gpflow.set_trainable(model.likelihood.variance, False)
+            return agent
 
         return build
 
@@ -195,7 +253,8 @@ class GymTask(Task):
         return plotting.save_all(exp, exp.directory, title=s.env,
                                  state_dims=tuple(range(min(D, 3))),
                                  distance_label="distance to the target [cost widths]",
-                                 threshold=s.success_distance if s.success == "hold" else None)
+                                 threshold=None if s.success == "survive"
+                                 else s.success_distance)
 
     def notes(self, summary: Dict[str, Any]) -> List[str]:
         steps = [e["steps"] for e in summary["episodes"]]

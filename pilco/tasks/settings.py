@@ -159,7 +159,8 @@ def _describe(values: Mapping[str, Any]) -> str:
 def settings_from_dict(cls: Type[S], values: Mapping[str, Any]) -> S:
     """``cls`` from a mapping such as a saved run's settings: unknown keys are dropped
     (settings since removed), missing ones take their field's default, lists become the
-    tuples of fields with several values."""
+    tuples of fields with several values, and a single value of such a field (a preset's,
+    or a run saved before the setting took several) a tuple of one."""
     kept: Dict[str, Any] = {}
     for field in dataclasses.fields(cls):
         if field.name not in values:
@@ -167,6 +168,9 @@ def settings_from_dict(cls: Type[S], values: Mapping[str, Any]) -> S:
         value = values[field.name]
         if isinstance(value, list):
             value = tuple(value)
+        elif (value is not None and not isinstance(value, tuple)
+              and (field_meta(field) or {}).get("nargs") is not None):
+            value = (value,)
         kept[field.name] = value
     return cls(**kept)
 
