@@ -3,14 +3,16 @@
 The environment is named on the command line, with the target state and the cost widths
 of the saturating cost; each action can be held for several steps, and the success rule is
 stated as a setting: the last episode survived ``--success-steps`` steps (an environment
-that terminates when it fails) or held the target for them. ``--preset`` gives other
-libraries' examples on gymnasium's current versions (``inverted-pendulum``, ``torchrl``).
+that terminates when it fails), held the target for them, or reached it. ``--preset`` gives
+other libraries' examples on gymnasium's current versions (``inverted-pendulum``,
+``torchrl``, ``mountain-car``, ``pendulum``).
 Every setting is a flag (``--help``); the task itself is :mod:`pilco.tasks.gym`.
 
 Usage::
 
     python examples/gym.py --env InvertedPendulum-v5 --horizon 40 --episodes 6
     python examples/gym.py --preset torchrl --seed 0
+    python examples/gym.py --preset mountain-car --seed 0
     python examples/gym.py --env Pendulum-v1 --target 1 0 0 --widths 0.5 0.5 inf \\
         --action-repeat 3 --success hold --success-steps 10 --success-distance 0.4
 """

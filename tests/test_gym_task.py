@@ -58,6 +58,8 @@ def test_pendulum_with_a_target_widths_an_angle_and_the_hold_rule(tmp_path):
     (["--env", "Pendulum-v1", "--noise-variance", "1", "2"], "--noise-variance: one number"),
     (["--env", "Pendulum-v1", "--widths", "1", "1", "inf", "--success-dims", "2"],
      "distance dimensions [2]: each must be one of 0-2 with a finite width"),
+    (["--env", "Pendulum-v1", "--state-dims", "0", "3"],
+     "state dimensions [0, 3]: each once, of the observation's 0-2"),
 ])
 def test_bad_settings_are_usage_errors_before_any_episode(flags, message, tmp_path, capsys):
     with pytest.raises(SystemExit) as stop:
@@ -125,3 +127,20 @@ def test_the_gym_task_never_renders(tmp_path):
     # an arbitrary env's renderer may need pygame, or MuJoCo beside TensorFlow: no frames
     args = GYM.parse(["--env", "Pendulum-v1", "--output", str(tmp_path / "r")])
     assert not args.no_render and GYM.config(args).render is False
+
+
+def test_state_dims_keep_part_of_the_observation_and_the_model_its_first_steps(tmp_path):
+    # Pendulum-v1's observation is [cos θ, sin θ, θ̇]: the state here is [θ̇, cos θ]
+    exp, summary = run(tmp_path, "--env", "Pendulum-v1", "--horizon", "6",
+                       "--state-dims", "2", "0", "--target", "0", "1", "--model-steps", "4")
+    env = exp.make_env()
+    x, _ = env.reset(seed=3)
+    raw = env.unwrapped.state  # [θ, θ̇]
+    assert x == pytest.approx([raw[1], np.cos(raw[0])]) and env.observation_space.shape == (2,)
+    assert exp.agent.mgpr.num_outputs == 2
+    X, Y = exp.training_data()
+    # every step is kept in the data, the model learns from the first 4 of each episode
+    with np.load(exp.store.data_path) as data:
+        assert data["X"].shape == (12, 3)
+    assert X.shape == (8, 3) and Y.shape == (8, 2)
+    assert np.array_equal(X[4:], exp.episodes[1].transitions()[0][:4])

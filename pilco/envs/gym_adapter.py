@@ -6,8 +6,9 @@ dimensions with a finite width (the saturating reward ``exp(-distance² / 2)`` i
 task's) or over the dimensions named as ``distance_dims``, and holds each action for
 ``action_repeat`` of the environment's steps (their rewards summed; an episode that
 terminates or is truncated during them ends there). The state is the observation as
-float64. Bad settings (a non-Box space, a target or widths of
-the wrong length, a width that is not positive) raise before any episode.
+float64, or the observation's dimensions named as ``state_dims`` (e.g. without a contact
+force that a smooth model cannot follow). Bad settings (a non-Box space, a target or
+widths of the wrong length, a width that is not positive) raise before any episode.
 """
 from __future__ import annotations
 
@@ -40,14 +41,22 @@ class GymAdapter(gymnasium.Wrapper):
         action_repeat: environment steps per step of PILCO (the reference port's SUBS).
         distance_dims: the state dimensions of ``info["distance"]`` (default: those with a
             finite width); each needs a finite width.
+        state_dims: the observation's dimensions kept as the state, in this order
+            (default: all); ``target``, ``widths`` and ``distance_dims`` refer to the state.
     """
 
     def __init__(self, env: gymnasium.Env, target: Sequence[float] = (),
                  widths: Sequence[float] = (1.0,), action_repeat: int = 1,
-                 distance_dims: Sequence[int] = ()) -> None:
+                 distance_dims: Sequence[int] = (), state_dims: Sequence[int] = ()) -> None:
         super().__init__(env)
-        D = box_dimension(env.observation_space, "observation")
+        observed = box_dimension(env.observation_space, "observation")
         box_dimension(env.action_space, "action")
+        self._kept = np.array([int(i) for i in state_dims] or range(observed), dtype=int)
+        bad = [int(i) for i in self._kept if not 0 <= i < observed]
+        if bad or len(set(self._kept.tolist())) < len(self._kept):
+            raise ValueError(f"state dimensions {self._kept.tolist()}: each once, of the "
+                             f"observation's 0-{observed - 1}")
+        D = len(self._kept)
         target = np.zeros(D) if len(target) == 0 else np.asarray(target, dtype=np.float64)
         if target.shape != (D,) or not np.all(np.isfinite(target)):
             raise ValueError(f"target must be {D} finite numbers (the state's dimensions), "
@@ -80,7 +89,7 @@ class GymAdapter(gymnasium.Wrapper):
         return float(np.sqrt(np.sum((z / self.widths[self._measured]) ** 2)))
 
     def _out(self, obs, info: dict):
-        x = np.asarray(obs, dtype=np.float64).reshape(-1)
+        x = np.asarray(obs, dtype=np.float64).reshape(-1)[self._kept]
         return x, {**info, "distance": self.distance(x)}
 
     def reset(self, **kwargs):

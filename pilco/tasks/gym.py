@@ -22,13 +22,16 @@ it fails, e.g. a pole that falls; an episode that ends early keeps its data), or
 ``hold``, its last ``--success-steps`` states all within ``--success-distance`` cost
 widths of the target, or ``reach``, one of its states that close (e.g. a goal where the
 environment ends the episode). The distance of ``hold`` and ``reach`` is measured over
-``--success-dims`` (default: the dimensions in the cost). The start distribution's
+``--success-dims`` (default: the dimensions in the cost). ``--state-dims`` keeps some of
+the observation's dimensions as the state; ``--model-steps N`` trains the dynamics model
+on the first N steps of each episode only. The start distribution's
 variance (``--start-var``) and a fixed noise variance of the dynamics GPs
 (``--noise-variance``; 0: learned) take one number per state dimension or one for all.
 
 Presets (``--preset NAME``) hold other libraries' examples on gymnasium's current
 versions: ``inverted-pendulum``, the reference GPflow port's ``inverted_pendulum.py``, and
-``torchrl``, TorchRL's PILCO example (both on InvertedPendulum-v5); ``mountain-car``, the
+``torchrl``, TorchRL's PILCO example (both on InvertedPendulum-v5);
+``inverted-double-pendulum``, the port's ``inv_double_pendulum.py``; ``mountain-car``, the
 port's ``mountain_car.py`` (MountainCarContinuous-v0); ``pendulum``, the port's
 ``pendulum_swing_up.py`` (Pendulum-v1 from hanging down); see :data:`PRESETS`.
 """
@@ -46,7 +49,7 @@ from .base import LastEpisodeHooks, Task
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
 
-__all__ = ["GymSettings", "GymTask", "GYM", "PRESETS"]
+__all__ = ["GymSettings", "GymHooks", "GymTask", "GYM", "PRESETS"]
 
 #: other libraries' examples on gymnasium's current versions; what each leaves out
 PRESETS: Dict[str, Dict[str, Any]] = {
@@ -78,6 +81,23 @@ PRESETS: Dict[str, Dict[str, Any]] = {
                          widths=(0.16, 0.03), start_var=(0.0065, 4.5e-5),
                          noise_variance=(6.5e-4, 4.5e-6), success="reach", success_dims=(0,),
                          success_distance=0.05 / 0.16),
+    # the reference port's inv_double_pendulum.py: 5 random rollouts of 40 steps, then 12
+    # learned episodes of 130 steps, the model learning from the first 40 of each, horizon
+    # 40, 40 basis functions, 10 iterations and 2 restarts for the GPs and the policy, the
+    # GPs' noise variance 1e-3, the start N(0, 0.005 I), the reward W = 5 I but 1 on the
+    # cart's position and speed. The port's state was the cart, the two angles and the
+    # three speeds; InvertedDoublePendulum-v5 observes the angles as sines and cosines
+    # (kept, each at the angle's width) and one constraint force (left out). Not carried
+    # over: the port's extra ends of an episode (|x| > 0.9, a constraint force above 0.15;
+    # v5 ends it when the tip falls below 1 m) and its stop at the first episode of more
+    # than 120 steps. Success: the last learned episode lasts all 130 steps.
+    "inverted-double-pendulum": dict(
+        env="InvertedDoublePendulum-v5", state_dims=tuple(range(8)), random_episodes=5,
+        episodes=17, horizon=130, planning_horizon=40, model_steps=40, basis_functions=40,
+        policy_iters=10, policy_restarts=2, model_iters=10, model_restarts=2,
+        target=(0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0),
+        widths=(1.0,) + (1 / math.sqrt(5.0),) * 4 + (1.0,) + (1 / math.sqrt(5.0),) * 2,
+        start_var=(0.005,), noise_variance=(1e-3,), success="survive", success_steps=130),
     # the reference port's pendulum_swing_up.py (the `pendulum` task's workload) on the
     # package's Pendulum-v1 that starts hanging down, as the port's reset does, each action
     # held for 3 steps: 4 random episodes, then 8 learned ones of 40 steps, 30 basis
@@ -121,6 +141,13 @@ class GymSettings(RunSettings):
                                       kind=float, nargs="+", metavar="X", unset="zeros")
     widths: tuple = setting((1.0,), "cost width of each state dimension, or one for all "
                             "(inf: not in the cost)", kind=float, nargs="+", metavar="W")
+    state_dims: Optional[tuple] = setting(None, "the observation's dimensions kept as the "
+                                          "state (--target, --widths, --angles refer to "
+                                          "it)", kind=int, nargs="+", metavar="I",
+                                          unset="all")
+    model_steps: Optional[int] = setting(None, "the dynamics model learns from the first N "
+                                         "steps of each episode", kind=positive_int,
+                                         unset="every step")
     angles: Optional[tuple] = setting(None, "state dimensions that are angles (seen as sine "
                                       "and cosine)", kind=int, nargs="+", metavar="I",
                                       unset="none")
@@ -151,6 +178,20 @@ class GymSettings(RunSettings):
         metavar="I", unset="the dimensions in the cost")
 
 
+class GymHooks(LastEpisodeHooks):
+    """Success in the last episode; with ``--model-steps N`` the model learns from the
+    first N steps of each episode (the reference port's double pendulum runs 130 steps and
+    learns from the first 40)."""
+
+    def model_data(self, run):
+        n = self.settings.model_steps
+        if not n:
+            return None
+        pairs = [e.transitions() for e in run.episodes]
+        return (np.concatenate([X[:n] for X, _ in pairs]),
+                np.concatenate([Y[:n] for _, Y in pairs]), None)
+
+
 class GymTask(Task):
     """PILCO on a gymnasium environment named on the command line."""
 
@@ -176,7 +217,8 @@ class GymTask(Task):
             raise ValueError(f"--env {s.env}: cannot make the environment ({err})") from None
         try:
             adapter = GymAdapter(env, s.target or (), s.widths, s.action_repeat,
-                                 distance_dims=s.success_dims or ())
+                                 distance_dims=s.success_dims or (),
+                                 state_dims=s.state_dims or ())
         except (TypeError, ValueError) as err:
             env.close()
             raise ValueError(f"--env {s.env}: {err}") from None
@@ -242,7 +284,7 @@ class GymTask(Task):
 
         return build
 
-    run_hooks = LastEpisodeHooks
+    run_hooks = GymHooks
 
     def figures(self, exp, s: GymSettings) -> List[str]:
         """Distances per step, predicted vs real cost, one- and multi-step predictions of
