@@ -107,6 +107,17 @@ def test_an_older_run_file_with_missing_removed_and_list_values_resumes(tmp_path
         parse(["--resume", str(tmp_path / "missing")])
 
 
+def test_a_saved_single_value_of_a_setting_that_now_takes_several_is_a_tuple():
+    """The gym task's start variance was one number; runs saved then resume with it as
+    the one-element tuple the per-dimension setting reads."""
+    from pilco.tasks.gym import GymSettings
+
+    old = settings_from_dict(GymSettings, {"start_var": 0.001, "noise_variance": 0.0,
+                                           "widths": [0.5, 0.5, 1.0], "output": "x"})
+    assert old.start_var == (0.001,) and old.noise_variance == (0.0,)
+    assert old.widths == (0.5, 0.5, 1.0) and old.angles is None  # None stays unset
+
+
 def test_settings_round_trip_through_a_real_runs_progress_file(tmp_path):
     """A run written by a task stores its settings; reading them back gives the same
     settings object (the resume precedence keeps every saved value)."""
