@@ -144,3 +144,23 @@ def test_state_dims_keep_part_of_the_observation_and_the_model_its_first_steps(t
         assert data["X"].shape == (12, 3)
     assert X.shape == (8, 3) and Y.shape == (8, 2)
     assert np.array_equal(X[4:], exp.episodes[1].transitions()[0][:4])
+
+
+@pytest.mark.parametrize("preset, mujoco", [("mountain-car", False),
+                                            ("inverted-double-pendulum", True)])
+def test_a_preset_runs_end_to_end(preset, mujoco, tmp_path):
+    # the preset's settings, only shorter: one random and one learned episode
+    if mujoco:
+        pytest.importorskip("mujoco")
+    exp, summary = run(tmp_path, "--preset", preset, "--random-episodes", "1", "--horizon",
+                       "12", "--planning-horizon", "8", "--policy-restarts", "1",
+                       "--model-restarts", "1")
+    steps = [e["steps"] for e in summary["episodes"]]
+    assert len(steps) == 2 and all(1 <= n <= 12 for n in steps)
+    D = len(PRESETS[preset]["target"])
+    assert exp.agent.mgpr.num_outputs == D and exp.agent.horizon == 8
+    assert np.allclose(np.diag(exp.agent.S_init),
+                       np.broadcast_to(PRESETS[preset]["start_var"], (D,)))
+    X, _ = exp.training_data()
+    cap = PRESETS[preset].get("model_steps") or 12
+    assert len(X) == sum(min(n, cap) for n in steps)
