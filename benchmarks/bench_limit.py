@@ -16,12 +16,13 @@ Usage::
 
 Each thread setting runs in a fresh process of its own (TensorFlow fixes its thread
 pools at its first operation): ``1`` is a task's own setting (``TF_NUM_INTRAOP_THREADS=1``,
-:func:`pilco.runtime.configure_threads`; the inter-op pool keeps every CPU, so the
-objective's independent groups of output pairs run side by side and one evaluation can
-keep more than one core busy; numpy's BLAS on one thread), ``sweep`` a sweep's run on one
-CPU (one intra-op and one inter-op thread, :func:`pilco.runtime.thread_environment`: one
-group of output pairs, everything on one core), ``default`` TensorFlow's and numpy's
-defaults (every CPU).
+:func:`pilco.runtime.configure_threads`; the inter-op pool keeps every CPU, so
+independent parts of the objective run side by side, with ``PILCO_PAIR_GROUPS=threads``
+also its groups of output pairs, and one evaluation can keep more than one core busy;
+numpy's BLAS on one thread), ``sweep`` a sweep's run on one CPU (one intra-op and one
+inter-op thread, :func:`pilco.runtime.thread_environment`: everything on one core),
+``default`` TensorFlow's and numpy's defaults (every CPU). Each row records its number of
+pair groups.
 
 How the flops are counted: the objective + gradient is traced as one ``tf.function``
 (with the dynamics GP's data and the start distributions in variables of static shape,

@@ -308,11 +308,12 @@ def configure_threads(threads: Optional[int] = None) -> None:
     alone and in a sweep, in every process.
 
     ``None`` (a task's process): one intra-op thread unless ``TF_NUM_INTRAOP_THREADS``
-    says otherwise (the inter-op pool keeps its default, every CPU): the policy
-    objective's groups of output pairs (:func:`pilco.moments.pair_groups`) then run
-    side by side, one per CPU, which keeps the CPUs busier than TensorFlow's default of
-    splitting each of these small batched operations over them (docs/performance.md).
-    Takes effect in a process that has not run a TensorFlow operation yet.
+    says otherwise (the inter-op pool keeps its default, every CPU): an operation then
+    computes the same bits whatever the CPUs, and independent parts of the graph still
+    run side by side (with ``PILCO_PAIR_GROUPS=threads`` also the policy objective's
+    groups of output pairs, :func:`pilco.moments.pair_groups`: faster on several CPUs,
+    but rounded as their number says; docs/performance.md). Takes effect in a process
+    that has not run a TensorFlow operation yet.
 
     ``threads`` (``python -m pilco.diagnose --threads N``): ``threads`` intra- and
     inter-op threads through ``tf.config.threading`` (imports TensorFlow; before its

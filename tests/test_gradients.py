@@ -232,6 +232,22 @@ def test_pair_groups_cover_every_pair_once_the_diagonal_first(E, groups, count):
     assert not sizes or max(sizes) - min(sizes) <= 1  # the off-diagonal pairs spread evenly
 
 
+def test_one_group_of_pairs_whatever_the_threads_unless_asked(monkeypatch):
+    """The grouping changes the rounding, so it does not follow the CPUs by itself: one
+    block unless PILCO_PAIR_GROUPS asks for a number of groups or one per thread."""
+    monkeypatch.setattr(moment_pairs, "_parallel_threads", lambda: 2)
+    monkeypatch.delenv("PILCO_PAIR_GROUPS", raising=False)
+    assert moments.pair_groups(15, 5) == [(0, 15)]
+    monkeypatch.setenv("PILCO_PAIR_GROUPS", "threads")
+    assert len(moments.pair_groups(15, 5)) == 2
+    monkeypatch.setenv("PILCO_PAIR_GROUPS", "3")
+    assert len(moments.pair_groups(15, 5)) == 3
+    for bad in ("0", "two"):
+        monkeypatch.setenv("PILCO_PAIR_GROUPS", bad)
+        with pytest.raises(ValueError, match="PILCO_PAIR_GROUPS"):
+            moments.pair_groups(15, 5)
+
+
 @pytest.mark.parametrize("groups", [2, 3, 4])
 def test_grouped_pair_block_equals_one_group(monkeypatch, groups):
     """The output pairs in groups that run side by side (the rollout's path, constant
@@ -246,9 +262,9 @@ def test_grouped_pair_block_equals_one_group(monkeypatch, groups):
     fact = gp.factorize()
     w = [rng.standard_normal(shape) for shape in ((1, 5), (5, 5), (3, 5))]
     results = []
-    for threads in (1, groups):
-        monkeypatch.setattr(moment_pairs, "_parallel_threads", lambda: threads)
-        assert len(moments.pair_groups(15, 5)) == threads
+    for count in (1, groups):
+        monkeypatch.setenv("PILCO_PAIR_GROUPS", str(count))
+        assert len(moments.pair_groups(15, 5)) == count
         m, s = tf.Variable(M_IN), tf.Variable(S_IN)
         with tf.GradientTape() as tape:
             out = moments.moment_match(m, s, fact, constant=True)

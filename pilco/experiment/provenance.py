@@ -27,7 +27,7 @@ PACKAGES = ("pilco", "tensorflow", "tensorflow-probability", "gpflow", "numpy", 
 #: environment variables that change TensorFlow's arithmetic or its thread pools
 ENVIRONMENT = ("TF_ENABLE_ONEDNN_OPTS", "TF_NUM_INTRAOP_THREADS", "TF_NUM_INTEROP_THREADS",
                "OMP_NUM_THREADS", "PILCO_ARITHMETIC_OPTIMIZER", "PILCO_PORTABLE_ARITHMETIC",
-               "NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE")
+               "PILCO_PAIR_GROUPS", "NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE")
 
 
 def git_commit(directory: Optional[str] = None) -> Optional[Dict[str, Any]]:

@@ -7,8 +7,9 @@ tensor. :func:`pair_weights` forms each pair's n x n weight matrix;
 one matrix product, so each pair costs one n x n ``exp`` and one contraction; and
 :func:`_pair_second_moments` is the fused block, with a hand-made gradient, used when
 the GP's weights are constants (the dynamics GP during policy optimisation). That block
-is split into :func:`pair_groups`, independent parts of the graph that TensorFlow's
-inter-op threads run side by side (each pair's arithmetic is unchanged).
+can be split into :func:`pair_groups`, independent parts of the graph that TensorFlow's
+inter-op threads run side by side (``PILCO_PAIR_GROUPS``; one block by default, whose
+rounding does not depend on the CPUs).
 """
 from __future__ import annotations
 
@@ -18,10 +19,39 @@ from typing import List, Optional, Tuple
 import numpy as np
 import tensorflow as tf
 
-__all__ = ["MAX_PAIR_GROUPS", "pair_groups", "symmetric_pairs", "pair_weights"]
+__all__ = ["MAX_PAIR_GROUPS", "GROUPS_VARIABLE", "configured_groups", "pair_groups",
+           "symmetric_pairs", "pair_weights"]
 
 #: at most this many groups of output pairs (:func:`pair_groups`)
 MAX_PAIR_GROUPS = 4
+#: the environment variable that asks for groups of output pairs (:func:`pair_groups`)
+GROUPS_VARIABLE = "PILCO_PAIR_GROUPS"
+
+
+def configured_groups() -> int:
+    """The groups of output pairs asked for by ``PILCO_PAIR_GROUPS``: unset, one (the
+    unsplit block); a whole number N >= 1, N; ``threads``, one per inter-op thread.
+
+    One is the default because the arithmetic depends on the grouping: batched
+    operations over fewer pairs vectorise and sum in another order, so the same run with
+    two groups (a run alone on two CPUs, when the groups followed the threads) and with
+    one (a sweep's run on one CPU) parted in the last bits and then in its path. With
+    one group a seed gives the same run alone, in a sweep and in a diagnosis on any
+    number of CPUs; more groups are faster alone on several CPUs (docs/performance.md)
+    but round as their number says."""
+    text = os.environ.get(GROUPS_VARIABLE, "").strip()
+    if not text:
+        return 1
+    if text == "threads":
+        return min(_parallel_threads(), MAX_PAIR_GROUPS)
+    try:
+        groups = int(text)
+    except ValueError:
+        groups = 0
+    if groups < 1:
+        raise ValueError(f"{GROUPS_VARIABLE}={text!r}: expected a whole number >= 1 or "
+                         f"'threads'")
+    return groups
 
 
 def _parallel_threads() -> int:
@@ -50,11 +80,11 @@ def pair_groups(P: int, E: int, groups: Optional[int] = None) -> List[Tuple[int,
     TensorFlow runs the groups side by side on its inter-op threads: one group's batched
     operations, split over threads, leave the other cores partly idle at these sizes,
     while independent groups keep every core busy (timings: docs/performance.md).
-    ``groups`` defaults to the inter-op threads (at most :data:`MAX_PAIR_GROUPS`, at
-    least 1); with one thread a single group (the unsplit block) is used.
+    ``groups`` defaults to :func:`configured_groups` (one, the unsplit block, unless
+    ``PILCO_PAIR_GROUPS`` asks for more).
     """
     if groups is None:
-        groups = min(_parallel_threads(), MAX_PAIR_GROUPS)
+        groups = configured_groups()
     groups = max(1, min(int(groups), P - E + 1))
     bounds = [int(round(b)) for b in np.linspace(0, P, groups + 1)]
     bounds[1] = max(bounds[1], E)
