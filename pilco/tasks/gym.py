@@ -165,9 +165,9 @@ class GymSettings(RunSettings):
     planning_horizon: Optional[int] = setting(
         None, "steps of the policy objective's prediction", kind=positive_int,
         unset="--horizon")
-    success: str = setting("survive", "success rule: the last episode lasted "
-                           "--success-steps steps, or held the target for them; reach: "
-                           "a learned episode came within --success-distance of it",
+    success: str = setting("survive", "success rule of the last episode: it lasted "
+                           "--success-steps steps, held the target for them, or reached "
+                           "it (a state within --success-distance)",
                            choices=("survive", "hold", "reach"))
     success_steps: Optional[int] = setting(None, "steps of the success rule",
                                            kind=positive_int, unset="--horizon")
