@@ -52,10 +52,12 @@ class Episode:
         return X, Y
 
 
-def stack_transitions(episodes) -> Tuple[np.ndarray, np.ndarray]:
-    """The training pairs of ``episodes`` one after the other: ``X [N, D+U]``, ``Y [N, D]``."""
+def stack_transitions(episodes, steps: Optional[int] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """The training pairs of ``episodes`` one after the other (of each only its first
+    ``steps``, when given): ``X [N, D+U]``, ``Y [N, D]``."""
     pairs = [e.transitions() for e in episodes]
-    return np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
+    return (np.concatenate([X[:steps] for X, _ in pairs]),
+            np.concatenate([Y[:steps] for _, Y in pairs]))
 
 
 class EnvironmentContractError(ValueError):

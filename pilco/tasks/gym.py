@@ -45,6 +45,7 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 
 from ..experiment import ExperimentConfig
+from ..experiment.episode import stack_transitions
 from .base import LastEpisodeHooks, Task
 from .settings import (RunSettings, non_negative_float, positive_float, positive_int, setting,
                        task_settings)
@@ -185,11 +186,7 @@ class GymHooks(LastEpisodeHooks):
 
     def model_data(self, run):
         n = self.settings.model_steps
-        if not n:
-            return None
-        pairs = [e.transitions() for e in run.episodes]
-        return (np.concatenate([X[:n] for X, _ in pairs]),
-                np.concatenate([Y[:n] for _, Y in pairs]), None)
+        return (*stack_transitions(run.episodes, n), None) if n else None
 
 
 class GymTask(Task):
