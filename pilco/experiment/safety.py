@@ -9,17 +9,18 @@ policy's risk over the horizon is predicted; above the threshold ``mu`` is raise
 search repeated, at most ``attempts`` searches in all, after which the run keeps the policy
 of the episode before when it meets the threshold under the new model
 (:func:`pilco.models.safe.safe_policy_search`). When no policy meets it, the episode does
-**not** run the policy: it runs :attr:`Safety.safe_action` at every step (``watch``), and
-its record says so. Every learned episode's record holds ``safety`` (the predicted risk,
-``mu``, the searches, ``executed``, ``fallback``), and every episode's record ``violated``
-(some real state broke the constraint) and ``violation_steps``; the summary's ``safety``
-counts them.
+**not** run the policy: it runs :attr:`Safety.safe_action` at every step (``watch``): a
+constant action, or a fixed controller of the state (e.g. one that brakes a cart to the
+middle of its track, where "no force" lets it roll on), and its record says so. Every
+learned episode's record holds ``safety`` (the predicted risk, ``mu``, the searches,
+``executed``, ``fallback``), and every episode's record ``violated`` (some real state
+broke the constraint) and ``violation_steps``; the summary's ``safety`` counts them.
 """
 from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import Any, Dict, Optional, Sequence
+from typing import Any, Callable, Dict, Optional, Sequence, Union
 
 import numpy as np
 
@@ -41,12 +42,14 @@ class Safety:
     the predicted risk over the horizon (combined by ``rule``: ``"independent"``, Safe
     PILCO's ``1 - Π(1 - p_t)``, or the ``"union"`` bound), at most ``attempts`` searches
     per episode, ``mu`` raised by ``raise_by`` above the threshold and lowered by
-    ``lower_by`` below ``far_below`` times it, and ``safe_action`` [U], what an episode
-    runs when no policy is predicted safe (e.g. braking)."""
+    ``lower_by`` below ``far_below`` times it, and ``safe_action``, what an episode runs
+    when no policy is predicted safe: a constant action [U] (e.g. braking), or a
+    controller ``x [D] -> u [U]`` of the observed state that is known to keep the system
+    inside the constraint (:meth:`action_at`)."""
 
     constraint: Any
     threshold: float
-    safe_action: Sequence[float]
+    safe_action: Union[Sequence[float], Callable[[np.ndarray], Any]]
     attempts: int = 3
     rule: str = "independent"
     raise_by: float = 1.5
@@ -60,10 +63,28 @@ class Safety:
             raise ValueError(f"rule must be one of {COMBINE}, got {self.rule!r}")
         if int(self.attempts) < 1:
             raise ValueError(f"attempts must be at least 1, got {self.attempts}")
+        if callable(self.safe_action):
+            return
         action = np.asarray(self.safe_action, dtype=np.float64).reshape(-1)
         if action.size == 0 or not np.all(np.isfinite(action)):
-            raise ValueError(f"safe_action must be finite numbers, one per action, got "
-                             f"{self.safe_action!r}")
+            raise ValueError(f"safe_action must be finite numbers, one per action, or a "
+                             f"controller x -> u, got {self.safe_action!r}")
+
+    def action_at(self, x: np.ndarray) -> np.ndarray:
+        """The safe action at the observed state ``x`` [D]: [U], float64."""
+        if callable(self.safe_action):
+            action = np.asarray(self.safe_action(np.asarray(x, dtype=np.float64)),
+                                dtype=np.float64).reshape(-1)
+            if not np.all(np.isfinite(action)):
+                raise ValueError(f"the safe action's controller returned {action} at {x}")
+            return action
+        return np.asarray(self.safe_action, dtype=np.float64).reshape(-1).copy()
+
+    def describe(self) -> str:
+        """The safe action in words, for logs."""
+        if callable(self.safe_action):
+            return repr(self.safe_action)
+        return str(list(np.asarray(self.safe_action, dtype=np.float64).reshape(-1)))
 
 
 class RecordsViolations(RunHooks):
@@ -132,19 +153,14 @@ class SafeRun(RecordsViolations):
         notes["extra_evaluations"] = notes.get("extra_evaluations", 0) + extra["evaluations"]
         if not result.safe:
             logger.warning("episode %d: no policy predicted safe (risk %.3g > %.3g): the "
-                           "episode runs the safe action %s", number, result.risk,
-                           safety.threshold, list(safety.safe_action))
+                           "episode runs the safe action (%s)", number, result.risk,
+                           safety.threshold, safety.describe())
 
     def watch(self, run, number: int, policy):
         policy = super().watch(run, number, policy)
         if run.policy_notes.get("safety", {}).get("executed", True):
             return policy
-        action = np.asarray(self.safety.safe_action, dtype=np.float64).reshape(-1)
-
-        def safe(x):
-            return action.copy()
-
-        return safe
+        return self.safety.action_at
 
 
 def safety_counts(records) -> Dict[str, Any]:

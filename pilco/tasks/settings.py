@@ -74,12 +74,15 @@ class SafetySettings(RunSettings):
                              "(sum, a bound)", choices=("independent", "union"),
                              group="safety")
 
-    def safety(self, constraint, safe_action: Sequence[float]):
+    def safety(self, constraint, safe_action):
         """The :class:`~pilco.experiment.safety.Safety` of these settings for
-        ``constraint``, running ``safe_action`` when no policy is predicted safe."""
+        ``constraint``, running ``safe_action`` (a constant action [U] or a controller
+        ``x -> u``) when no policy is predicted safe."""
         from ..experiment.safety import Safety
 
-        return Safety(constraint, self.risk_threshold, list(safe_action),
+        if not callable(safe_action):
+            safe_action = list(safe_action)
+        return Safety(constraint, self.risk_threshold, safe_action,
                       attempts=self.safe_attempts, rule=self.risk_rule)
 
 
