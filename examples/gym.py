@@ -3,9 +3,11 @@
 The environment is named on the command line, with the target state and the cost widths
 of the saturating cost; each action can be held for several steps, and the success rule is
 stated as a setting: the last episode survived ``--success-steps`` steps (an environment
-that terminates when it fails), held the target for them, or reached it. ``--preset`` gives
-other libraries' examples on gymnasium's current versions (``inverted-pendulum``,
-``torchrl``, ``mountain-car``, ``pendulum``).
+that terminates when it fails), held the target for them, reached it, or advanced a
+distance (locomotion, whose reward is a linear term minus penalties near joint limits).
+``--preset`` gives other libraries' examples on gymnasium's current versions
+(``inverted-pendulum``, ``torchrl``, ``inverted-double-pendulum``, ``mountain-car``,
+``pendulum``, ``swimmer``).
 Every setting is a flag (``--help``); the task itself is :mod:`pilco.tasks.gym`.
 
 Usage::
@@ -15,6 +17,8 @@ Usage::
     python examples/gym.py --preset mountain-car --seed 0
     python examples/gym.py --env Pendulum-v1 --target 1 0 0 --widths 0.5 0.5 inf \\
         --action-repeat 3 --success hold --success-steps 10 --success-distance 0.4
+    python examples/gym.py --env Swimmer-v5 --widths inf --linear 0 0 0 1 0 0 0 0 \
+        --action-repeat 5 --success advance --success-distance 1
 """
 import sys
 

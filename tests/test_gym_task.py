@@ -60,6 +60,14 @@ def test_pendulum_with_a_target_widths_an_angle_and_the_hold_rule(tmp_path):
      "distance dimensions [2]: each must be one of 0-2 with a finite width"),
     (["--env", "Pendulum-v1", "--state-dims", "0", "3"],
      "state dimensions [0, 3]: each once, of the observation's 0-2"),
+    (["--env", "Pendulum-v1", "--linear", "1", "2"], "--linear: 3 weights"),
+    (["--env", "Pendulum-v1", "--penalties", "1", "2"], "--penalties: triples"),
+    (["--env", "Pendulum-v1", "--penalties", "3", "0", "1"], "the dimension 3.0 must be"),
+    (["--env", "Pendulum-v1", "--penalties", "1", "0", "0"], "must be a positive number"),
+    (["--env", "Pendulum-v1", "--widths", "inf", "--success", "advance"],
+     "the reward has nothing to reward"),
+    (["--env", "Pendulum-v1", "--success", "advance"],
+     "progress_key 'x_position': the environment's info has no such number"),
 ])
 def test_bad_settings_are_usage_errors_before_any_episode(flags, message, tmp_path, capsys):
     with pytest.raises(SystemExit) as stop:
@@ -72,7 +80,8 @@ def test_bad_settings_are_usage_errors_before_any_episode(flags, message, tmp_pa
 def test_the_presets_name_known_settings():
     for name in PRESETS:
         args = GYM.read_settings(["--preset", name, "--output", "x"])
-        assert args.env == PRESETS[name]["env"] and args.success in ("survive", "hold", "reach")
+        assert args.env == PRESETS[name]["env"]
+        assert args.success in ("survive", "hold", "reach", "advance")
     car = GYM.read_settings(["--preset", "mountain-car", "--output", "x"])
     assert (car.horizon, car.action_repeat, car.start_var) == (25, 5, (0.0065, 4.5e-5))
 
@@ -164,3 +173,29 @@ def test_a_preset_runs_end_to_end(preset, mujoco, tmp_path):
     X, _ = exp.training_data()
     cap = PRESETS[preset].get("model_steps") or 12
     assert len(X) == sum(min(n, cap) for n in steps)
+
+
+def test_the_swimmer_preset_rewards_speed_minus_joint_limits_and_measures_progress(tmp_path):
+    """The swimmer preset (shortened): its reward is the forward speed minus a saturating
+    bump at ±95° of each joint, with no target term; each episode's distances are what is
+    left of the 1 m to swim (1 at the start, above 1 after swimming backwards), and
+    success is that rest reaching 0."""
+    pytest.importorskip("mujoco")
+    import tensorflow as tf
+
+    exp, summary = run(tmp_path, "--preset", "swimmer", "--random-episodes", "1",
+                       "--horizon", "12", "--planning-horizon", "6", "--model-steps", "6",
+                       "--policy-restarts", "1", "--model-restarts", "1")
+    assert [e["steps"] for e in summary["episodes"]] == [12, 12]
+    reward = exp.agent.reward
+    x = np.array([[0.1, np.radians(95.0), -0.3, 0.4, 0.0, 0.0, 0.0, 0.0]])
+    mean, _ = reward.moments(tf.constant(x), tf.zeros((8, 8), tf.float64))
+    bumps = [np.exp(-10 * (x[0, d] - c) ** 2 / 2) for d in (2, 1)
+             for c in (np.radians(95.0), -np.radians(95.0))]
+    assert float(np.squeeze(mean)) == pytest.approx(0.4 - sum(bumps), rel=1e-9)
+    for distances in summary["distances"]:
+        assert distances[0] == 1.0 and min(distances) >= 0.0
+    assert summary["success"] == (min(summary["distances"][-1][1:]) == 0.0)
+    assert exp.config.solved_rule == "reach"
+    X, _ = exp.training_data()
+    assert len(X) == 12  # the first 6 steps of each episode

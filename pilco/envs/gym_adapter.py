@@ -7,8 +7,12 @@ task's) or over the dimensions named as ``distance_dims``, and holds each action
 ``action_repeat`` of the environment's steps (their rewards summed; an episode that
 terminates or is truncated during them ends there). The state is the observation as
 float64, or the observation's dimensions named as ``state_dims`` (e.g. without a contact
-force that a smooth model cannot follow). Bad settings (a non-Box space, a target or
-widths of the wrong length, a width that is not positive) raise before any episode.
+force that a smooth model cannot follow). For locomotion, where the goal is a distance
+travelled rather than a state, ``progress_key`` names a number of the environment's
+``info`` (e.g. Swimmer's ``"x_position"``) and ``info["distance"]`` is what is left of
+``progress_goal`` since the episode's start, ``max(0, goal - (info[key] - info₀[key]))``.
+Bad settings (a non-Box space, a target or widths of the wrong length, a width that is not
+positive) raise before any episode.
 """
 from __future__ import annotations
 
@@ -43,11 +47,15 @@ class GymAdapter(gymnasium.Wrapper):
             finite width); each needs a finite width.
         state_dims: the observation's dimensions kept as the state, in this order
             (default: all); ``target``, ``widths`` and ``distance_dims`` refer to the state.
+        progress_key, progress_goal: ``info["distance"]`` is the part of ``progress_goal``
+            not yet travelled along ``info[progress_key]`` (module docstring); the widths
+            then need not have a finite one.
     """
 
     def __init__(self, env: gymnasium.Env, target: Sequence[float] = (),
                  widths: Sequence[float] = (1.0,), action_repeat: int = 1,
-                 distance_dims: Sequence[int] = (), state_dims: Sequence[int] = ()) -> None:
+                 distance_dims: Sequence[int] = (), state_dims: Sequence[int] = (),
+                 progress_key: str = "", progress_goal: float = 0.0) -> None:
         super().__init__(env)
         observed = box_dimension(env.observation_space, "observation")
         box_dimension(env.action_space, "action")
@@ -67,8 +75,14 @@ class GymAdapter(gymnasium.Wrapper):
         if widths.shape != (D,) or np.any(np.isnan(widths)) or np.any(widths <= 0):
             raise ValueError(f"widths must be one positive number or {D} (inf: not in the "
                              f"cost), got {list(widths)}")
-        if not np.any(np.isfinite(widths)):
-            raise ValueError("at least one width must be finite: the cost needs a dimension")
+        if not np.any(np.isfinite(widths)) and not progress_key:
+            raise ValueError("at least one width must be finite: the distance needs a "
+                             "dimension")
+        if not np.isfinite(progress_goal) or progress_goal < 0:
+            raise ValueError(f"progress_goal must be a finite number >= 0, got "
+                             f"{progress_goal!r}")
+        self.progress_key, self.progress_goal = str(progress_key), float(progress_goal)
+        self._progress_start = 0.0
         if isinstance(action_repeat, bool) or not isinstance(action_repeat, (int, np.integer)) \
                 or action_repeat < 1:
             raise ValueError(f"action_repeat must be an integer >= 1, got {action_repeat!r}")
@@ -88,12 +102,24 @@ class GymAdapter(gymnasium.Wrapper):
         z = (np.asarray(state, dtype=np.float64) - self.target)[self._measured]
         return float(np.sqrt(np.sum((z / self.widths[self._measured]) ** 2)))
 
+    def _progress(self, info: dict) -> float:
+        try:
+            return float(info[self.progress_key])
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"progress_key {self.progress_key!r}: the environment's info "
+                             f"has no such number (its keys: {sorted(info)})") from None
+
     def _out(self, obs, info: dict):
         x = np.asarray(obs, dtype=np.float64).reshape(-1)[self._kept]
+        if self.progress_key:
+            left = self.progress_goal - (self._progress(info) - self._progress_start)
+            return x, {**info, "distance": max(0.0, left)}
         return x, {**info, "distance": self.distance(x)}
 
     def reset(self, **kwargs):
         obs, info = self.env.reset(**kwargs)
+        if self.progress_key:
+            self._progress_start = self._progress(info)
         return self._out(obs, info)
 
     def step(self, action):

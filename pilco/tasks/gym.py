@@ -12,6 +12,11 @@ policy is optimised from the mean of the episodes' start states with variances
 ``--start-var``, over ``--planning-horizon`` steps (default
 ``--horizon``).
 
+For locomotion the reward may add a linear term ``w·x`` (``--linear``, one weight per
+state dimension, e.g. on the forward speed) and subtract saturating penalties
+``exp(-(x_d - c)² / 2w²)`` near limits (``--penalties``, triples ``d c w``); with every
+width ``inf`` the target term is left out.
+
 The run draws its figures but no frames of the environment (an arbitrary environment's
 renderer may need packages that are not installed, and MuJoCo's may not run in a process
 that loaded TensorFlow).
@@ -21,10 +26,12 @@ Success (stated before a run, as ``--success``): ``survive``, the last episode l
 it fails, e.g. a pole that falls; an episode that ends early keeps its data), or
 ``hold``, its last ``--success-steps`` states all within ``--success-distance`` cost
 widths of the target, or ``reach``, one of its states that close (e.g. a goal where the
-environment ends the episode). The distance of ``hold`` and ``reach`` is measured over
-``--success-dims`` (default: the dimensions in the cost). ``--state-dims`` keeps some of
-the observation's dimensions as the state; ``--model-steps N`` trains the dynamics model
-on the first N steps of each episode only. The start distribution's
+environment ends the episode), or ``advance``, it travelled ``--success-distance`` along
+the environment's ``info[--progress-key]`` (e.g. a swimmer's ``x_position``; the episodes'
+distances are then what is left of that goal). The distance of ``hold`` and ``reach`` is
+measured over ``--success-dims`` (default: the dimensions in the cost). ``--state-dims``
+keeps some of the observation's dimensions as the state; ``--model-steps N`` trains the
+dynamics model on the first N steps of each episode only. The start distribution's
 variance (``--start-var``) and a fixed noise variance of the dynamics GPs
 (``--noise-variance``; 0: learned) take one number per state dimension or one for all.
 
@@ -33,7 +40,8 @@ versions: ``inverted-pendulum``, the reference GPflow port's ``inverted_pendulum
 ``torchrl``, TorchRL's PILCO example (both on InvertedPendulum-v5);
 ``inverted-double-pendulum``, the port's ``inv_double_pendulum.py``; ``mountain-car``, the
 port's ``mountain_car.py`` (MountainCarContinuous-v0); ``pendulum``, the port's
-``pendulum_swing_up.py`` (Pendulum-v1 from hanging down); see :data:`PRESETS`.
+``pendulum_swing_up.py`` (Pendulum-v1 from hanging down); ``swimmer``, the port's
+``swimmer.py`` (Swimmer-v5); see :data:`PRESETS`.
 """
 from __future__ import annotations
 
@@ -113,7 +121,42 @@ PRESETS: Dict[str, Dict[str, Any]] = {
                      start_var=(0.01, 0.05, 0.01), noise_variance=(1e-3,), success="hold",
                      success_dims=(0, 1), success_steps=10,
                      success_distance=2 * math.sqrt(2) * math.sin(0.15)),
+    # the reference port's swimmer.py (its last version) on Swimmer-v5, whose observation
+    # is the port's state: the three angles (body, two joints) and the five speeds. Each
+    # action held for 5 steps (0.2 s); 10 random episodes, then 15 learned ones of 50
+    # steps (10 s), the model learning from the first 15 steps of each (the port's
+    # random rollouts were 15 steps long) and the policy planning over 15; 40 basis
+    # functions, 80 iterations and 2 restarts for the GPs and the policy, the start
+    # N(0, 0.005 I), the GPs' noise learned. The reward: the forward speed (dimension 3)
+    # minus four saturating bumps at ±95° of each joint (W = 10 there, a width of
+    # 1/√10 rad). Success, stated before any sweep: the last learned episode swims at
+    # least 1 m forward in its 10 s (no random episode of 20 tried went 0.81 m; a
+    # sinusoidal gait held open loop goes 1.0-1.4 m).
+    "swimmer": dict(env="Swimmer-v5", action_repeat=5, random_episodes=10, episodes=25,
+                    horizon=50, planning_horizon=15, model_steps=15, basis_functions=40,
+                    policy_iters=80, policy_restarts=2, model_iters=80, model_restarts=2,
+                    start_var=(0.005,), widths=(math.inf,),
+                    linear=(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0),
+                    penalties=tuple(v for dim in (2, 1) for sign in (1.0, -1.0)
+                                    for v in (float(dim), sign * math.radians(95.0),
+                                              1 / math.sqrt(10.0))),
+                    success="advance", progress_key="x_position", success_distance=1.0),
 }
+
+
+def _penalty_triples(penalties: Optional[tuple], D: int) -> List[tuple]:
+    """``--penalties`` as ``(dimension, centre, width)`` triples, checked against the
+    state's ``D`` dimensions."""
+    values = list(penalties or ())
+    if len(values) % 3:
+        raise ValueError(f"--penalties: triples DIM CENTRE WIDTH, got {len(values)} numbers")
+    triples = []
+    for k in range(0, len(values), 3):
+        d, centre, width = values[k:k + 3]
+        if d != int(d) or not 0 <= int(d) < D:
+            raise ValueError(f"--penalties: the dimension {d} must be one of 0-{D - 1}")
+        triples.append((int(d), float(centre), float(width)))
+    return triples
 
 
 def _json_object(text: str) -> str:
@@ -166,14 +209,25 @@ class GymSettings(RunSettings):
     planning_horizon: Optional[int] = setting(
         None, "steps of the policy objective's prediction", kind=positive_int,
         unset="--horizon")
+    linear: Optional[tuple] = setting(None, "weights of a linear reward term w·x, one per "
+                                      "state dimension (e.g. a forward speed)", kind=float,
+                                      nargs="+", metavar="W", unset="none")
+    penalties: Optional[tuple] = setting(
+        None, "saturating penalties subtracted from the reward, as triples DIM CENTRE WIDTH: "
+        "exp(-(x_DIM - CENTRE)^2 / 2 WIDTH^2) each (e.g. near a joint's limit)", kind=float,
+        nargs="+", metavar="X", unset="none")
     success: str = setting("survive", "success rule of the last episode: it lasted "
-                           "--success-steps steps, held the target for them, or reached "
-                           "it (a state within --success-distance)",
-                           choices=("survive", "hold", "reach"))
+                           "--success-steps steps, held the target for them, reached "
+                           "it (a state within --success-distance), or advanced "
+                           "--success-distance along --progress-key",
+                           choices=("survive", "hold", "reach", "advance"))
+    progress_key: str = setting("x_position", "advance: the environment's info number "
+                                "whose growth over an episode is its progress")
     success_steps: Optional[int] = setting(None, "steps of the success rule",
                                            kind=positive_int, unset="--horizon")
     success_distance: float = setting(1.0, "hold, reach: the distance to the target in cost "
-                                      "widths", kind=non_negative_float)
+                                      "widths; advance: the progress to make",
+                                      kind=non_negative_float)
     success_dims: Optional[tuple] = setting(
         None, "state dimensions of the success rule's distance", kind=int, nargs="+",
         metavar="I", unset="the dimensions in the cost")
@@ -212,35 +266,60 @@ class GymTask(Task):
             env = gymnasium.make(s.env, **json.loads(s.env_kwargs))
         except (gymnasium.error.Error, TypeError, ImportError) as err:
             raise ValueError(f"--env {s.env}: cannot make the environment ({err})") from None
+        advance = s.success == "advance"
         try:
             adapter = GymAdapter(env, s.target or (), s.widths, s.action_repeat,
                                  distance_dims=s.success_dims or (),
-                                 state_dims=s.state_dims or ())
+                                 state_dims=s.state_dims or (),
+                                 progress_key=s.progress_key if advance else "",
+                                 progress_goal=s.success_distance if advance else 0.0)
         except (TypeError, ValueError) as err:
             env.close()
             raise ValueError(f"--env {s.env}: {err}") from None
+        try:
+            self._check_state_settings(s, adapter)
+        except ValueError:
+            adapter.close()
+            raise
+        return adapter
+
+    @staticmethod
+    def _check_state_settings(s: GymSettings, adapter) -> None:
+        """The settings that refer to the state's dimensions, against the adapter's."""
         D = adapter.observation_space.shape[0]
         bad = [i for i in s.angles or () if not 0 <= i < D]
         if bad:
-            adapter.close()
             raise ValueError(f"--angles {bad}: the state has dimensions 0-{D - 1}")
         for name in ("start_var", "noise_variance"):
             given = np.atleast_1d(getattr(s, name)).size
             if given not in (1, D):
-                adapter.close()
                 raise ValueError(f"--{name.replace('_', '-')}: one number or {D} (one per "
                                  f"state dimension), got {given}")
-        return adapter
+        if s.linear is not None and len(s.linear) != D:
+            raise ValueError(f"--linear: {D} weights (one per state dimension), got "
+                             f"{len(s.linear)}")
+        for d, _, width in _penalty_triples(s.penalties, D):
+            if not width > 0 or not np.isfinite(width):
+                raise ValueError(f"--penalties: the width of the penalty on dimension {d} "
+                                 f"must be a positive number, got {width}")
+        if not np.any(np.isfinite(adapter.widths)) and s.linear is None:
+            raise ValueError("--widths: every width is inf and there is no --linear term: "
+                             "the reward has nothing to reward")
+        if s.success == "advance":  # the key is read at a reset: fail here, not later
+            adapter.reset(seed=0)
 
     def config(self, s: GymSettings) -> ExperimentConfig:
         """The loop's config; never rendering: an arbitrary environment's renderer may
         need packages that are not installed (pygame) or, for MuJoCo, may not run in a
         process that loaded TensorFlow."""
         near = s.success in ("hold", "reach")
+        # advance: the distances are what is left of the goal, 0 once travelled
+        threshold = s.success_distance if near else 1e-9 if s.success == "advance" else 1.0
+        rule = "reach" if s.success == "advance" else s.success
         config = self.loop_config(
             s, env_id=s.env, env_kwargs=json.loads(s.env_kwargs), random_action_scale=None,
-            cost_width=1.0, success_threshold=s.success_distance if near else 1.0,
-            solved_rule=s.success, hold_steps=s.success_steps or s.horizon)
+            cost_width=1.0, success_threshold=threshold,
+            solved_rule=rule, hold_steps=s.success_steps or s.horizon)
         return dataclasses.replace(config, render=False)
 
     def make_env(self, s: GymSettings, config: ExperimentConfig):
@@ -248,20 +327,18 @@ class GymTask(Task):
 
     def agent_builder(self, s: GymSettings, env):
         """``(data, start_states) -> PILCO``: an RBF policy on the state (angles as sine
-        and cosine), the saturating reward of the distance in cost widths, the start
-        distribution centred on the mean of the episodes' start states, the GPs' noise
-        variance fixed where ``--noise-variance`` gives one."""
+        and cosine), the reward (:meth:`reward`), the start distribution centred on the
+        mean of the episodes' start states, the GPs' noise variance fixed where
+        ``--noise-variance`` gives one."""
         import gpflow
 
         from ..controllers import RbfController
         from ..models import PILCO
-        from ..rewards import ExponentialReward
 
         D = env.observation_space.shape[0]
         U = env.action_space.shape[0]
         bound = (s.max_action if s.max_action is not None
                  else float(np.min(np.abs(env.action_space.high))))
-        inverse = np.where(np.isfinite(env.widths), 1.0 / env.widths ** 2, 0.0)
         start_var = np.broadcast_to(np.atleast_1d(s.start_var).astype(np.float64), (D,))
         noise = np.broadcast_to(np.atleast_1d(s.noise_variance).astype(np.float64), (D,))
 
@@ -269,7 +346,7 @@ class GymTask(Task):
             angles = list(s.angles or ())
             controller = RbfController(D + len(angles), U, s.basis_functions,
                                        max_action=bound, seed=s.seed)
-            reward = ExponentialReward(D, W=np.diag(inverse), t=env.target)
+            reward = self.reward(s, env)
             m_init = np.mean(np.asarray(start_states, dtype=np.float64), axis=0)[None, :]
             agent = PILCO(data, controller, reward, horizon=s.planning_horizon or s.horizon,
                           m_init=m_init, S_init=np.diag(start_var), angle_indices=angles)
@@ -281,6 +358,31 @@ class GymTask(Task):
 
         return build
 
+    @staticmethod
+    def reward(s: GymSettings, env):
+        """The saturating reward of the distance to the target in cost widths (left out
+        when every width is ``inf``), plus ``--linear``'s ``w·x``, minus each of
+        ``--penalties``' saturating bumps."""
+        from ..rewards import CombinedRewards, ExponentialReward, LinearReward
+
+        D = env.observation_space.shape[0]
+        terms, coefs = [], []
+        if np.any(np.isfinite(env.widths)):
+            inverse = np.where(np.isfinite(env.widths), 1.0 / env.widths ** 2, 0.0)
+            terms.append(ExponentialReward(D, W=np.diag(inverse), t=env.target))
+            coefs.append(1.0)
+        if s.linear is not None:
+            terms.append(LinearReward(D, np.asarray(s.linear, dtype=np.float64)))
+            coefs.append(1.0)
+        for d, centre, width in _penalty_triples(s.penalties, D):
+            W, t = np.zeros((D, D)), np.zeros(D)
+            W[d, d], t[d] = 1.0 / width ** 2, centre
+            terms.append(ExponentialReward(D, W=W, t=t))
+            coefs.append(-1.0)
+        if len(terms) == 1:
+            return terms[0]
+        return CombinedRewards(D, terms, coefs=coefs)
+
     run_hooks = GymHooks
 
     def figures(self, exp, s: GymSettings) -> List[str]:
@@ -291,8 +393,10 @@ class GymTask(Task):
         D = exp.make_env().observation_space.shape[0]
         return plotting.save_all(exp, exp.directory, title=s.env,
                                  state_dims=tuple(range(min(D, 3))),
-                                 distance_label="distance to the target [cost widths]",
-                                 threshold=None if s.success == "survive"
+                                 distance_label=(f"{s.progress_key}: left of the goal"
+                                                 if s.success == "advance" else
+                                                 "distance to the target [cost widths]"),
+                                 threshold=None if s.success in ("survive", "advance")
                                  else s.success_distance)
 
     def notes(self, summary: Dict[str, Any]) -> List[str]:
