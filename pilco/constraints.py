@@ -21,6 +21,13 @@ known in closed form and differentiable in (m, s), so that a policy search can w
   product ``Π P(inside_d)``, exact when the dimensions are uncorrelated.
 - :class:`OnMap`: any of them on ``A x + c`` (a Gaussian of mean ``A m + c`` and covariance
   ``A s Aᵀ``, exact), e.g. the reacher's gripper minus a point, or a sum of states.
+- :class:`AngleHalfSpace`: ``a_s sin θ + a_c cos θ ≤ b`` on an angle θ of the state (e.g. a
+  pendulum tip's height ``-l cos θ`` below a ceiling): the left side is ``R sin(θ + φ)``,
+  so the violation is θ in one interval per turn, and its probability a sum of normal
+  differences over the turns, exact. (A box on θ itself is a :class:`Box`: θ is a
+  dimension of the Gaussian state. A constraint mixing an angle's sine or cosine with
+  other dimensions, e.g. a cart-pole tip's horizontal position ``x + l sin θ``, is not
+  Gaussian and not offered.)
 
 :func:`horizon_risk` combines the steps' probabilities ``p_t`` into the probability of a
 violation anywhere on the horizon: ``"independent"``, ``1 - Π (1 - p_t)`` (Safe PILCO's
@@ -45,8 +52,8 @@ from gpflow.config import default_float
 from .validation import (check_entries, check_indices, check_matrix, check_non_negative_float,
                          check_positive_int)
 
-__all__ = ["HalfSpace", "Box", "Region", "OnMap", "ViolationPenalty", "horizon_risk",
-           "step_violations", "violated_states", "normal_tail", "constraint_config",
+__all__ = ["HalfSpace", "AngleHalfSpace", "Box", "Region", "OnMap", "ViolationPenalty",
+           "horizon_risk", "step_violations", "violated_states", "normal_tail", "constraint_config",
            "constraint_from_config", "COMBINE"]
 
 #: the ways of combining per-dimension or per-step probabilities
@@ -103,6 +110,66 @@ class HalfSpace:
         # a state known exactly (var 0): the violation is certain or impossible
         std = tf.sqrt(tf.maximum(var, tf.constant(1e-300, var.dtype)))
         return normal_tail((self.b - mean) / std)
+
+
+class AngleHalfSpace:
+    """``a_sin · sin θ + a_cos · cos θ ≤ b`` must hold for the angle ``θ = x[angle]``;
+    ``violation`` is its probability of failing, exact (module docstring).
+
+    With ``R = hypot(a_sin, a_cos)`` and ``φ = atan2(a_cos, a_sin)`` the left side is
+    ``R sin(θ + φ)``, above ``b`` exactly when θ lies in ``(α, β) + 2πk`` for some integer
+    k, ``α = asin(b / R) - φ``, ``β = π - asin(b / R) - φ``; for θ ~ N(μ, σ²) the
+    probability is ``Σ_k Φ((β + 2πk - μ) / σ) - Φ((α + 2πk - μ) / σ)``, summed over the
+    ``2·turns + 1`` turns nearest μ (the rest of the mass, beyond ``turns`` turns either
+    way, counted at the interval's share of a turn). ``|b| < R`` is required: otherwise the
+    constraint always or never holds.
+    """
+
+    def __init__(self, state_dim: int, angle: int, a_sin: float, a_cos: float, b: float,
+                 turns: int = 8):
+        self.state_dim = D = check_positive_int(state_dim, "state_dim")
+        self.angle = check_indices([angle], D, "angle")[0]
+        self.a_sin, self.a_cos, self.b = (float(v) for v in
+                                          check_entries([a_sin, a_cos, b], 3, "a_sin, a_cos, b"))
+        self.turns = check_positive_int(turns, "turns")
+        R = math.hypot(self.a_sin, self.a_cos)
+        if not abs(self.b) < R:
+            raise ValueError(f"|b| must be below hypot(a_sin, a_cos) = {R:.6g}, got b = "
+                             f"{self.b}: otherwise a_sin sin θ + a_cos cos θ <= b always or "
+                             f"never holds")
+        phi = math.atan2(self.a_cos, self.a_sin)
+        self._low = math.asin(self.b / R) - phi  # α
+        self._width = math.pi - 2.0 * math.asin(self.b / R)  # β - α, in (0, 2π)
+
+    def get_config(self) -> Dict[str, Any]:
+        """The arguments that rebuild it (:func:`constraint_from_config`)."""
+        return {"state_dim": self.state_dim, "angle": self.angle, "a_sin": self.a_sin,
+                "a_cos": self.a_cos, "b": self.b, "turns": self.turns}
+
+    def breaks(self, X) -> np.ndarray:
+        """Whether each known state of ``X`` [N, D] breaks it: bool [N]."""
+        theta = np.asarray(X, dtype=np.float64)[:, self.angle]
+        return self.a_sin * np.sin(theta) + self.a_cos * np.cos(theta) > self.b
+
+    @check_shapes("m: [1, D]", "s: [D, D]", "return: []")
+    def violation(self, m, s):
+        """``P(a_sin sin θ + a_cos cos θ > b)`` for x ~ N(m, s)."""
+        mu, var = m[0, self.angle], s[self.angle, self.angle]
+        std = tf.sqrt(tf.maximum(var, tf.constant(1e-300, var.dtype)))
+        two_pi = 2.0 * math.pi
+        # the turn whose interval is nearest the mean (a constant for the gradient)
+        centre = tf.stop_gradient(tf.round((mu - self._low - 0.5 * self._width) / two_pi))
+        k = centre + tf.range(-self.turns, self.turns + 1, dtype=mu.dtype)  # [2K+1]
+        lo = (self._low + two_pi * k - mu) / std
+        hi = lo + self._width / std
+        # Φ(hi) - Φ(lo), from the tail on the side away from the mean (precise far out)
+        upper = normal_tail(lo) - normal_tail(hi)
+        lower = normal_tail(-hi) - normal_tail(-lo)
+        inside = tf.reduce_sum(tf.where(lo > 0, upper, lower))
+        # outside the summed whole turns, from the first interval's start to one turn
+        # after the last's
+        beyond = normal_tail(-lo[0]) + normal_tail(lo[-1] + two_pi / std)
+        return inside + beyond * (self._width / two_pi)
 
 
 class Box:
@@ -328,7 +395,8 @@ class ViolationPenalty(gpflow.base.Module):
 
 
 #: the constraint classes :func:`constraint_from_config` rebuilds, by name
-_CLASSES = {"HalfSpace": HalfSpace, "Box": Box, "Region": Region, "OnMap": OnMap}
+_CLASSES = {"HalfSpace": HalfSpace, "AngleHalfSpace": AngleHalfSpace, "Box": Box,
+            "Region": Region, "OnMap": OnMap}
 
 
 def _number(v: float):

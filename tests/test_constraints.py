@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import tensorflow as tf
 
-from pilco.constraints import Box, HalfSpace, OnMap, horizon_risk, normal_tail
+from pilco.constraints import (AngleHalfSpace, Box, HalfSpace, OnMap, constraint_config,
+                               constraint_from_config, horizon_risk, normal_tail)
 
 SAMPLES = 200_000
 
@@ -86,8 +87,40 @@ def test_a_constraint_on_a_linear_map_is_exact():
     within_three_se(value(c2, m, s), (y[:, 0] < -1.0) | (y[:, 0] > 1.0))
 
 
+@pytest.mark.parametrize("theta, std, a_sin, a_cos, b", [
+    (2.8, 0.2, 0.0, 1.0, -0.97),   # a pendulum's cos θ near its lowest value
+    (2.8, 0.5, 0.0, 1.0, -0.9),
+    (0.3, 0.3, 0.0, 1.0, 0.9),     # near its highest
+    (0.0, 3.0, 1.0, 1.0, 0.5),     # spread over several turns
+    (10.0, 1.0, -1.0, 0.3, 0.2),   # a mean turns away from 0
+])
+def test_a_half_space_on_an_angles_sine_and_cosine_is_exact(theta, std, a_sin, a_cos, b):
+    """``a_sin sin θ + a_cos cos θ <= b``: where the Gaussian of the features (sin θ,
+    cos θ) would be off by up to 0.16 (cos θ is bounded and skewed near ±1), the sum over
+    the turns matches the samples; a known state is certain; it is saved and rebuilt."""
+    m = np.array([[0.5, theta]])
+    s = np.array([[0.3, 0.05 * std], [0.05 * std, std ** 2]])
+    c = AngleHalfSpace(2, 1, a_sin, a_cos, b)
+    x = samples(m, s)
+    assert np.array_equal(c.breaks(x), a_sin * np.sin(x[:, 1]) + a_cos * np.cos(x[:, 1]) > b)
+    within_three_se(value(c, m, s), c.breaks(x))
+    again = constraint_from_config(constraint_config(c))
+    assert value(again, m, s) == value(c, m, s)
+    known = float(c.breaks(m)[0])
+    assert value(c, m, np.zeros((2, 2))) == known
+
+
+def test_an_angle_half_space_that_always_or_never_holds_is_refused():
+    for b in (1.0, -1.5):
+        with pytest.raises(ValueError, match="always or never holds"):
+            AngleHalfSpace(2, 1, 0.0, 1.0, b)
+    with pytest.raises(ValueError, match="angle"):
+        AngleHalfSpace(2, 2, 0.0, 1.0, 0.5)
+
+
 @pytest.mark.parametrize("make", [
     lambda: HalfSpace(3, [1.0, -0.5, 0.2], 0.3),
+    lambda: AngleHalfSpace(3, 2, 0.6, -0.8, 0.3),
     lambda: Box(3, [0, 2], [-0.5, -1.0], [0.4, np.inf]),
     lambda: Box(3, [0, 1], [-0.5, -0.2], [0.4, 0.3], combine="independent"),
     lambda: OnMap(3, [[1.0, 1.0, 0.0]], HalfSpace(1, [1.0], 0.2)),
