@@ -36,9 +36,10 @@ def line_agent(wall):
 class SafeLine(SafeRun):
     """Safe PILCO's loop on the line with ``wall`` as its constraint."""
 
-    def __init__(self, wall, attempts=2):
+    def __init__(self, wall, attempts=2, first_search="penalised"):
         self.build = line_agent(wall)
-        self.safety = Safety(wall, 0.1, [SAFE_ACTION], attempts=attempts)
+        self.safety = Safety(wall, 0.1, [SAFE_ACTION], attempts=attempts,
+                             first_search=first_search)
 
     def make_env(self, run):
         return LineEnv()
@@ -47,11 +48,39 @@ class SafeLine(SafeRun):
         return self.build(data, start_states)
 
 
-def run_line(tmp_path, wall, episodes=3, attempts=2):
+def run_line(tmp_path, wall, episodes=3, attempts=2, first_search="penalised"):
     cfg = config(episodes=episodes, random_episodes=1, horizon=5, model_iters=10,
                  policy_iters=3, random_action_scale=0.3)
-    exp = Experiment(cfg, str(tmp_path / "run"), SafeLine(wall, attempts))
+    exp = Experiment(cfg, str(tmp_path / "run"), SafeLine(wall, attempts, first_search))
     return exp, exp.run()
+
+
+def test_a_plain_first_search_weighs_the_risk_only_after_an_unsafe_policy(tmp_path,
+                                                                          monkeypatch):
+    """``first_search="plain"``: the loop's own search of each learned episode runs with
+    the penalty's weight at 0 and the searches after an unsafe policy with mu (x1.5 each);
+    mu is back in the reward after the episode. Planted: no policy can be safe."""
+    from pilco.models import PILCO
+
+    seen = []
+    search = PILCO.optimize_policy
+
+    def watched(self, *args, **kwargs):
+        seen.append(float(self.reward.base_rewards[1].weight.numpy()))
+        return search(self, *args, **kwargs)
+
+    monkeypatch.setattr(PILCO, "optimize_policy", watched)
+    wall = HalfSpace(1, [1.0], -5.0)
+    exp, summary = run_line(tmp_path, wall, episodes=3, attempts=2, first_search="plain")
+    # mu (1 at first) is raised after each unsafe search, the episode's last one included
+    assert seen == pytest.approx([0.0, 1.5, 0.0, 1.5 ** 3])
+    learned = [r for r in summary["episodes"] if not r["random"]]
+    assert [t["weight"] for r in learned for t in r["safety"]["tries"]] == pytest.approx(
+        [0.0, 1.5, 0.0, 1.5 ** 3])
+    assert float(exp.agent.reward.base_rewards[1].weight.numpy()) == pytest.approx(1.5 ** 4)
+    assert not any(r["safety"]["executed"] for r in learned)
+    with pytest.raises(ValueError, match="first_search"):
+        Safety(wall, 0.1, [SAFE_ACTION], first_search="later")
 
 
 def test_a_policy_predicted_unsafe_is_never_executed(tmp_path):

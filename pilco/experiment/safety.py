@@ -8,7 +8,13 @@ After the loop's policy search of every learned episode (``after_policy_search``
 policy's risk over the horizon is predicted; above the threshold ``mu`` is raised and the
 search repeated, at most ``attempts`` searches in all, after which the run keeps the policy
 of the episode before when it meets the threshold under the new model
-(:func:`pilco.models.safe.safe_policy_search`). When no policy meets it, the episode does
+(:func:`pilco.models.safe.safe_policy_search`). With ``first_search="plain"`` the loop's
+own search of each episode maximises the return alone (the penalty's weight is 0 during
+it), and ``mu`` weighs the risk only in the searches after a policy predicted above the
+threshold: a risk that is already low then does not steer the learning (a penalty present
+in every search made the cart-pole swing the pole up with less cart travel, a motion it
+learned episodes later than without the penalty, if at all). When no policy meets it, the
+episode does
 **not** run the policy: it runs :attr:`Safety.safe_action` at every step (``watch``): a
 constant action, or a fixed controller of the state (e.g. one that brakes a cart to the
 middle of its track, where "no force" lets it roll on), and its record says so. Every
@@ -25,7 +31,8 @@ from typing import Any, Callable, Dict, Optional, Sequence, Union
 import numpy as np
 
 from ..constraints import COMBINE, horizon_risk, violated_states
-from ..models.safe import predicted_risk, predicted_step_risks, safe_policy_search
+from ..models.safe import (predicted_risk, predicted_step_risks, risk_penalty,
+                           safe_policy_search)
 from ..snapshots import snapshot
 from .hooks import RunHooks
 from .learning import search_policy
@@ -45,7 +52,10 @@ class Safety:
     ``lower_by`` below ``far_below`` times it, and ``safe_action``, what an episode runs
     when no policy is predicted safe: a constant action [U] (e.g. braking), or a
     controller ``x [D] -> u [U]`` of the observed state that is known to keep the system
-    inside the constraint (:meth:`action_at`)."""
+    inside the constraint (:meth:`action_at`). ``first_search``: ``"penalised"`` (Safe
+    PILCO's: every search on the return minus ``mu`` times the risk) or ``"plain"`` (the
+    episode's first search on the return alone, the penalty in the searches after an
+    unsafe policy only)."""
 
     constraint: Any
     threshold: float
@@ -55,6 +65,7 @@ class Safety:
     raise_by: float = 1.5
     lower_by: float = 0.75
     far_below: float = 0.25
+    first_search: str = "penalised"
 
     def __post_init__(self):
         if not 0.0 < float(self.threshold) < 1.0:
@@ -63,6 +74,9 @@ class Safety:
             raise ValueError(f"rule must be one of {COMBINE}, got {self.rule!r}")
         if int(self.attempts) < 1:
             raise ValueError(f"attempts must be at least 1, got {self.attempts}")
+        if self.first_search not in ("penalised", "plain"):
+            raise ValueError(f"first_search must be 'penalised' or 'plain', got "
+                             f"{self.first_search!r}")
         if callable(self.safe_action):
             return
         action = np.asarray(self.safe_action, dtype=np.float64).reshape(-1)
@@ -122,6 +136,8 @@ class SafeRun(RecordsViolations):
 
     #: the policy the episode's search started from and its predicted risk
     _start: Optional[tuple] = None
+    #: the risk's weight, kept while a plain first search runs
+    _weight: Optional[float] = None
 
     @property
     def constraint(self):
@@ -133,10 +149,17 @@ class SafeRun(RecordsViolations):
         agent = run.agent
         self._start = (snapshot(agent.controller),
                        predicted_risk(agent, self.constraint, self.safety.rule))
+        if self.safety.first_search == "plain":
+            penalty = risk_penalty(agent.reward)
+            self._weight = float(penalty.weight.numpy())
+            penalty.weight.assign(0.0)
 
     def after_policy_search(self, run, number: int, expected: float) -> None:
         super().after_policy_search(run, number, expected)
         safety, agent = self.safety, run.agent
+        if self._weight is not None:  # the plain search is over: mu weighs the risk again
+            risk_penalty(agent.reward).weight.assign(self._weight)
+            self._weight = None
         extra = {"evaluations": 0}
 
         def search() -> float:  # each further search adds the one before's evaluations
@@ -147,6 +170,8 @@ class SafeRun(RecordsViolations):
             agent, safety.threshold, attempts=safety.attempts, raise_by=safety.raise_by,
             lower_by=safety.lower_by, far_below=safety.far_below, rule=safety.rule,
             search=search, searched=expected, start=self._start)
+        if safety.first_search == "plain":
+            result.tries[0]["weight"] = 0.0  # the loop's own search weighed no risk
         notes = run.policy_notes
         notes["safety"] = dict(result.as_record(), executed=bool(result.safe),
                                threshold=float(safety.threshold))

@@ -29,8 +29,8 @@ from ..constraints import (COMBINE, ViolationPenalty, horizon_risk, step_violati
 from ..snapshots import restore, snapshot
 from ..validation import check_positive_float, check_positive_int
 
-__all__ = ["SafeSearch", "predicted_step_risks", "predicted_risk", "sampled_risk",
-           "safe_policy_search"]
+__all__ = ["SafeSearch", "predicted_step_risks", "predicted_risk", "risk_penalty",
+           "sampled_risk", "safe_policy_search"]
 
 logger = logging.getLogger(__name__)
 
@@ -98,7 +98,9 @@ def sampled_risk(agent, constraint, samples: int = 1000, seed: int = 0,
     return share, float(np.sqrt(max(share * (1.0 - share), 1e-12) / samples))
 
 
-def _penalty_of(reward) -> ViolationPenalty:
+def risk_penalty(reward) -> ViolationPenalty:
+    """The one :class:`~pilco.constraints.ViolationPenalty` of an agent's reward (itself,
+    or one term of a :class:`~pilco.rewards.CombinedRewards`); ValueError otherwise."""
     if isinstance(reward, ViolationPenalty):
         return reward
     found = [p for r in getattr(reward, "base_rewards", ())
@@ -140,7 +142,7 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
     if searched is None and start is not None:
         raise ValueError("start is the policy a search already run started from: give "
                          "searched (its expected return) with it")
-    penalty = _penalty_of(agent.reward)
+    penalty = risk_penalty(agent.reward)
     constraint = penalty.constraint
     if start is None:
         start = (snapshot(agent.controller), predicted_risk(agent, constraint, rule))

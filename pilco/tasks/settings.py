@@ -69,6 +69,11 @@ class SafetySettings(RunSettings):
     safe_attempts: int = setting(3, "policy searches per episode before giving up on a safe "
                                  "policy (mu x1.5 after each unsafe one)", kind=positive_int,
                                  group="safety")
+    safe_first_search: str = setting(
+        "penalised", "each episode's first policy search: on the return minus mu times the "
+        "risk (Safe PILCO's), or 'plain', on the return alone, mu weighing the risk only in "
+        "the searches after a policy predicted above the threshold",
+        choices=("penalised", "plain"), group="safety")
     risk_rule: str = setting("independent", "how the steps' probabilities combine: "
                              "'independent' (1 - prod(1 - p_t), Safe PILCO's) or 'union' "
                              "(sum, a bound)", choices=("independent", "union"),
@@ -83,7 +88,8 @@ class SafetySettings(RunSettings):
         if not callable(safe_action):
             safe_action = list(safe_action)
         return Safety(constraint, self.risk_threshold, safe_action,
-                      attempts=self.safe_attempts, rule=self.risk_rule)
+                      attempts=self.safe_attempts, rule=self.risk_rule,
+                      first_search=self.safe_first_search)
 
 
 def _flag_fields(cls: type) -> Iterable[dataclasses.Field]:
