@@ -11,9 +11,8 @@ of the episode before when it meets the threshold under the new model
 (:func:`pilco.models.safe.safe_policy_search`). With ``first_search="plain"`` the loop's
 own search of each episode maximises the return alone (the penalty's weight is 0 during
 it), and ``mu`` weighs the risk only in the searches after a policy predicted above the
-threshold, which start again from the policy the episode started from (the plain search's
-may lie where every nearby policy leaves for sure, and the risk's gradient is 0): a risk
-that is already low then does not steer the learning (a penalty present
+threshold, continuing from the unsafe policy: a risk that is already low then does not
+steer the learning (a penalty present
 in every search made the cart-pole swing the pole up with less cart travel, a motion it
 learned episodes later than without the penalty, if at all). When no policy meets it, the
 episode does
@@ -35,7 +34,7 @@ import numpy as np
 from ..constraints import COMBINE, horizon_risk, violated_states
 from ..models.safe import (predicted_risk, predicted_step_risks, risk_penalty,
                            safe_policy_search)
-from ..snapshots import restore, snapshot
+from ..snapshots import snapshot
 from .hooks import RunHooks
 from .learning import search_policy
 
@@ -57,7 +56,7 @@ class Safety:
     inside the constraint (:meth:`action_at`). ``first_search``: ``"penalised"`` (Safe
     PILCO's: every search on the return minus ``mu`` times the risk) or ``"plain"`` (the
     episode's first search on the return alone, the penalty in the searches after an
-    unsafe policy only, which start from the policy the episode started from)."""
+    unsafe policy only)."""
 
     constraint: Any
     threshold: float
@@ -166,11 +165,6 @@ class SafeRun(RecordsViolations):
 
         def search() -> float:  # each further search adds the one before's evaluations
             extra["evaluations"] += int(getattr(agent, "policy_evaluations", 0) or 0)
-            if safety.first_search == "plain" and not extra.get("repairing"):
-                # the plain search's policy is unsafe and may lie where the risk is
-                # flat at 1: the repair starts from the policy the episode started from
-                restore(agent.controller, self._start[0])
-                extra["repairing"] = True
             return search_policy(run, number, "policy (safe)")
 
         result = safe_policy_search(

@@ -71,8 +71,8 @@ a 0.5 m track in 2 of 29), and a threshold of 0.05 excluded 79 of its 81 episode
 held the pole, so that runs with it swung the pole up and never held it in 8 episodes.
 Each episode's first search maximises the return alone (``--safe-first-search plain``);
 the risk's weight acts only in the searches that repair a policy predicted above the
-threshold, from the policy the episode started from, on ``-mu log(1 - risk)``, whose
-gradient does not vanish where leaving is nearly certain. A penalty in every search
+threshold, on ``-mu log(1 - risk)``, whose gradient does not vanish where leaving is
+nearly certain. A penalty in every search
 (Safe PILCO's, ``penalised``) steered the learning to swing-ups with less cart travel,
 learned late or not at all.
 """
