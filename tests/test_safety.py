@@ -59,8 +59,9 @@ def test_a_plain_first_search_weighs_the_risk_only_after_an_unsafe_policy(tmp_pa
                                                                           monkeypatch):
     """``first_search="plain"``: the loop's own search of each learned episode runs with
     the penalty's weight at 0 and the searches after an unsafe policy with mu (x1.5 each),
-    continuing from the plain search's policy; mu is back in the reward after the
-    episode. Planted: no policy can be safe."""
+    continuing from the plain search's policy, then, none safe, one more from the policy
+    the episode started from at the episode's first mu; mu is back in the reward after
+    the episode as the unsafe searches left it. Planted: no policy can be safe."""
     from pilco.models import PILCO
 
     seen, starts = [], []
@@ -75,12 +76,15 @@ def test_a_plain_first_search_weighs_the_risk_only_after_an_unsafe_policy(tmp_pa
     wall = HalfSpace(1, [1.0], -5.0)
     exp, summary = run_line(tmp_path, wall, episodes=3, attempts=2, first_search="plain")
     # mu (1 at first) is raised after each unsafe search, the episode's last one included
-    assert seen == pytest.approx([0.0, 1.5, 0.0, 1.5 ** 3])
-    # each repair continues from where the episode's plain search ended
+    assert seen == pytest.approx([0.0, 1.5, 1.0, 0.0, 1.5 ** 3, 1.5 ** 2])
+    # the repair continues from where the plain search ended; the last one starts where
+    # the episode did
     assert not np.array_equal(starts[1], starts[0])
+    assert np.array_equal(starts[2], starts[0]) and np.array_equal(starts[5], starts[3])
     learned = [r for r in summary["episodes"] if not r["random"]]
     assert [t["weight"] for r in learned for t in r["safety"]["tries"]] == pytest.approx(
-        [0.0, 1.5, 0.0, 1.5 ** 3])
+        [0.0, 1.5, 1.0, 0.0, 1.5 ** 3, 1.5 ** 2])
+    assert all(r["safety"]["tries"][-1]["from_start"] for r in learned)
     assert float(exp.agent.reward.base_rewards[1].weight.numpy()) == pytest.approx(1.5 ** 4)
     assert not any(r["safety"]["executed"] for r in learned)
     with pytest.raises(ValueError, match="first_search"):

@@ -11,8 +11,10 @@ of the episode before when it meets the threshold under the new model
 (:func:`pilco.models.safe.safe_policy_search`). With ``first_search="plain"`` the loop's
 own search of each episode maximises the return alone (the penalty's weight is 0 during
 it), and ``mu`` weighs the risk only in the searches after a policy predicted above the
-threshold, continuing from the unsafe policy: a risk that is already low then does not
-steer the learning (a penalty present
+threshold, continuing from the unsafe policy, and when none gets below it nor does the
+policy the episode started from, once more from that policy with the episode's first
+``mu`` (the searched policies may lie where leaving is certain and the risk has no
+slope): a risk that is already low then does not steer the learning (a penalty present
 in every search made the cart-pole swing the pole up with less cart travel, a motion it
 learned episodes later than without the penalty, if at all). When no policy meets it, the
 episode does
@@ -139,6 +141,8 @@ class SafeRun(RecordsViolations):
     _start: Optional[tuple] = None
     #: the risk's weight, kept while a plain first search runs
     _weight: Optional[float] = None
+    #: the risk's weight the episode began with (a last repair from its first policy)
+    _episode_weight: Optional[float] = None
 
     @property
     def constraint(self):
@@ -158,9 +162,10 @@ class SafeRun(RecordsViolations):
     def after_policy_search(self, run, number: int, expected: float) -> None:
         super().after_policy_search(run, number, expected)
         safety, agent = self.safety, run.agent
+        self._episode_weight = None
         if self._weight is not None:  # the plain search is over: mu weighs the risk again
             risk_penalty(agent.reward).weight.assign(self._weight)
-            self._weight = None
+            self._episode_weight, self._weight = self._weight, None
         extra = {"evaluations": 0}
 
         def search() -> float:  # each further search adds the one before's evaluations
@@ -170,7 +175,8 @@ class SafeRun(RecordsViolations):
         result = safe_policy_search(
             agent, safety.threshold, attempts=safety.attempts, raise_by=safety.raise_by,
             lower_by=safety.lower_by, far_below=safety.far_below, rule=safety.rule,
-            search=search, searched=expected, start=self._start)
+            search=search, searched=expected, start=self._start,
+            repair_weight=self._episode_weight if safety.first_search == "plain" else None)
         if safety.first_search == "plain":
             result.tries[0]["weight"] = 0.0  # the loop's own search weighed no risk
         notes = run.policy_notes

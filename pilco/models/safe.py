@@ -117,6 +117,7 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
                        rule: str = "independent", search: Optional[Callable[[], float]] = None,
                        searched: Optional[float] = None,
                        start: Optional[Tuple[Dict[str, np.ndarray], float]] = None,
+                       repair_weight: Optional[float] = None,
                        **optimize: Any) -> SafeSearch:
     """Search the agent's policy until its predicted risk is at most ``threshold`` (module
     docstring); returns a :class:`SafeSearch`.
@@ -127,7 +128,11 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
     policy in place is checked first and counts as the first of ``attempts``; ``start``
     is then ``(pilco.snapshots.snapshot of the controller, predicted risk)`` of the policy
     that search started from (the fallback), else the policy in place when called is the
-    start."""
+    start. ``repair_weight``: when every search and the start policy are above the
+    threshold, one more search from the start policy with ``mu`` at this weight (the
+    searched policies may lie where leaving is certain and the risk has no slope; near
+    the start, which met the threshold under the model before, it has one); its policy
+    runs if it meets the threshold (``fallback`` True)."""
     threshold = check_positive_float(threshold, "threshold")
     if threshold >= 1.0:
         raise ValueError(f"threshold must be below 1 (a probability), got {threshold}")
@@ -164,6 +169,21 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
                     ", searched again" if attempt + 1 < attempts else "")
         penalty.weight.assign(weight * raise_by)
     params, start_risk = start
+    if start_risk > threshold and repair_weight is not None:
+        restore(agent.controller, params)
+        raised = float(penalty.weight.numpy())
+        penalty.weight.assign(check_positive_float(repair_weight, "repair_weight"))
+        value = search()
+        penalty.weight.assign(raised)  # mu stays as the unsafe searches left it
+        risk = predicted_risk(agent, constraint, rule)
+        tries.append({"weight": float(repair_weight), "risk": risk,
+                      "expected_return": float(value), "from_start": True})
+        if risk <= threshold:
+            logger.warning("no policy below the risk threshold %.3g in %d searches; one "
+                           "more from the policy the search started from: risk %.3g, run",
+                           threshold, attempts, risk)
+            return SafeSearch(True, risk, True, float(penalty.weight.numpy()), tries)
+        start_risk = risk
     if start_risk <= threshold:
         restore(agent.controller, params)
         logger.warning("no policy below the risk threshold %.3g in %d searches: the policy "
