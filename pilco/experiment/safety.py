@@ -139,10 +139,8 @@ class SafeRun(RecordsViolations):
 
     #: the policy the episode's search started from and its predicted risk
     _start: Optional[tuple] = None
-    #: the risk's weight, kept while a plain first search runs
+    #: the risk's weight the episode began with, kept while a plain first search runs
     _weight: Optional[float] = None
-    #: the risk's weight the episode began with (a last repair from its first policy)
-    _episode_weight: Optional[float] = None
 
     @property
     def constraint(self):
@@ -162,10 +160,11 @@ class SafeRun(RecordsViolations):
     def after_policy_search(self, run, number: int, expected: float) -> None:
         super().after_policy_search(run, number, expected)
         safety, agent = self.safety, run.agent
-        self._episode_weight = None
-        if self._weight is not None:  # the plain search is over: mu weighs the risk again
-            risk_penalty(agent.reward).weight.assign(self._weight)
-            self._episode_weight, self._weight = self._weight, None
+        # a plain search is over: mu weighs the risk again, and a last repair from the
+        # episode's first policy (plain only) uses the weight the episode began with
+        repair_weight, self._weight = self._weight, None
+        if repair_weight is not None:
+            risk_penalty(agent.reward).weight.assign(repair_weight)
         extra = {"evaluations": 0}
 
         def search() -> float:  # each further search adds the one before's evaluations
@@ -176,7 +175,7 @@ class SafeRun(RecordsViolations):
             agent, safety.threshold, attempts=safety.attempts, raise_by=safety.raise_by,
             lower_by=safety.lower_by, far_below=safety.far_below, rule=safety.rule,
             search=search, searched=expected, start=self._start,
-            repair_weight=self._episode_weight if safety.first_search == "plain" else None)
+            repair_weight=repair_weight)
         if safety.first_search == "plain":
             result.tries[0]["weight"] = 0.0  # the loop's own search weighed no risk
         notes = run.policy_notes

@@ -146,7 +146,7 @@ PRESETS: Dict[str, Dict[str, Any]] = {
 
 def _penalty_triples(penalties: Optional[tuple], D: int) -> List[tuple]:
     """``--penalties`` as ``(dimension, centre, width)`` triples, checked against the
-    state's ``D`` dimensions."""
+    state's ``D`` dimensions and for a positive, finite width."""
     values = list(penalties or ())
     if len(values) % 3:
         raise ValueError(f"--penalties: triples DIM CENTRE WIDTH, got {len(values)} numbers")
@@ -155,6 +155,9 @@ def _penalty_triples(penalties: Optional[tuple], D: int) -> List[tuple]:
         d, centre, width = values[k:k + 3]
         if d != int(d) or not 0 <= int(d) < D:
             raise ValueError(f"--penalties: the dimension {d} must be one of 0-{D - 1}")
+        if not width > 0 or not np.isfinite(width):
+            raise ValueError(f"--penalties: the width of the penalty on dimension {int(d)} "
+                             f"must be a positive number, got {width}")
         triples.append((int(d), float(centre), float(width)))
     return triples
 
@@ -298,10 +301,7 @@ class GymTask(Task):
         if s.linear is not None and len(s.linear) != D:
             raise ValueError(f"--linear: {D} weights (one per state dimension), got "
                              f"{len(s.linear)}")
-        for d, _, width in _penalty_triples(s.penalties, D):
-            if not width > 0 or not np.isfinite(width):
-                raise ValueError(f"--penalties: the width of the penalty on dimension {d} "
-                                 f"must be a positive number, got {width}")
+        _penalty_triples(s.penalties, D)
         if not np.any(np.isfinite(adapter.widths)) and s.linear is None:
             raise ValueError("--widths: every width is inf and there is no --linear term: "
                              "the reward has nothing to reward")
