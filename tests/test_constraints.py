@@ -304,6 +304,8 @@ def test_the_safe_search_checks_its_arguments():
         safe_policy_search(agent, 1.5)
     with pytest.raises(ValueError, match="raise_by must be above 1"):
         safe_policy_search(agent, 0.1, raise_by=0.9)
+    with pytest.raises(ValueError, match="repair_weight"):
+        safe_policy_search(agent, 0.1, repair_weight=-1.0)
 
 
 @pytest.mark.parametrize("combine", ["bound", "independent"])

@@ -147,6 +147,8 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
     if searched is None and start is not None:
         raise ValueError("start is the policy a search already run started from: give "
                          "searched (its expected return) with it")
+    if repair_weight is not None:
+        repair_weight = check_positive_float(repair_weight, "repair_weight")
     penalty = risk_penalty(agent.reward)
     constraint = penalty.constraint
     if start is None:
@@ -172,18 +174,17 @@ def safe_policy_search(agent, threshold: float, *, attempts: int = 3, raise_by: 
     if start_risk > threshold and repair_weight is not None:
         restore(agent.controller, params)
         raised = float(penalty.weight.numpy())
-        penalty.weight.assign(check_positive_float(repair_weight, "repair_weight"))
+        penalty.weight.assign(repair_weight)
         value = search()
         penalty.weight.assign(raised)  # mu stays as the unsafe searches left it
         risk = predicted_risk(agent, constraint, rule)
-        tries.append({"weight": float(repair_weight), "risk": risk,
+        tries.append({"weight": repair_weight, "risk": risk,
                       "expected_return": float(value), "from_start": True})
         if risk <= threshold:
             logger.warning("no policy below the risk threshold %.3g in %d searches; one "
                            "more from the policy the search started from: risk %.3g, run",
                            threshold, attempts, risk)
             return SafeSearch(True, risk, True, float(penalty.weight.numpy()), tries)
-        start_risk = risk
     if start_risk <= threshold:
         restore(agent.controller, params)
         logger.warning("no policy below the risk threshold %.3g in %d searches: the policy "
